@@ -1,0 +1,76 @@
+"""Train one agent for a budget of env steps and print its learning curve.
+
+Eval success against env steps and wall time, at marks along the way; resumes a run
+left unfinished in the same directory. A benchmark, not a test: it prints figures.
+
+    python benchmarks/learning_curve.py --env FetchPush-v4 --algo her --steps 300000 \
+        --run-dir runs/bench-push-her-0
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import math
+import platform
+from pathlib import Path
+
+import torch
+
+from dtd.config import Algo, TrainConfig
+from dtd.run_dir import RunDir
+from dtd.runs import train
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--env", default="FetchPush-v4")
+    parser.add_argument("--algo", default="her", choices=[a.value for a in Algo])
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--steps", type=int, default=300_000, help="env steps to train for")
+    parser.add_argument("--marks", default="50000,100000,200000,300000", help="env steps to report at")
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--run-dir", type=Path, required=True)
+    args = parser.parse_args()
+
+    base = TrainConfig(env=args.env, algo=Algo(args.algo), seed=args.seed, threads=args.threads)
+    steps_per_epoch = base.n_cycles * base.episodes_per_cycle * _horizon(args.env)
+    config = dataclasses.replace(base, epochs=math.ceil(args.steps / steps_per_epoch))
+    run = RunDir(args.run_dir)
+    if run.latest.exists():
+        train(config, resume=run.root, show_progress=False)
+    else:
+        train(config, run_dir=run.root, force=run.holds_run(), show_progress=False)
+    report(run, [int(m) for m in args.marks.split(",")], config)
+
+
+def report(run: RunDir, marks: list[int], config: TrainConfig) -> None:
+    """Print eval success and wall time at each mark (the first epoch at or past it)."""
+    with open(run.metrics) as file:
+        rows = [{k: float(v) for k, v in row.items()} for row in csv.DictReader(file)]
+    print(f"# {config.algo.value} on {config.env}, seed {config.seed}, {torch.get_num_threads()} torch thread(s), "
+          f"{platform.processor() or platform.machine()}")
+    print(f"{'env_steps':>10} {'eval_success':>12} {'best_so_far':>11} {'wall_s':>8}")
+    for mark in marks:
+        reached = [row for row in rows if row["env_steps"] >= mark]
+        if not reached:
+            print(f"{mark:>10} {'not reached':>12}")
+            continue
+        row = reached[0]
+        best = max(r["eval_success"] for r in rows if r["env_steps"] <= row["env_steps"])
+        print(f"{int(row['env_steps']):>10} {row['eval_success']:>12.3f} {best:>11.3f} {row['wall_s']:>8.0f}")
+
+
+def _horizon(env_id: str) -> int:
+    from dtd.envs import make_env
+
+    env = make_env(env_id)
+    try:
+        return int(env.spec.max_episode_steps)
+    finally:
+        env.close()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,105 @@
+"""The flat goal-conditioned agents, DDPG and HER: one learner acting toward the task's goal."""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+import numpy as np
+
+from dtd.buffer import EpisodeBuffer
+from dtd.ddpg import DDPGLearner
+from dtd.envs import RewardFn
+from dtd.exploration import ActionNoise
+from dtd.her import GoalStrategy, relabel_probability, sample_transitions
+from dtd.records import Episodes
+
+
+class Agent(Protocol):
+    """What the rollout and the trainer need of an agent."""
+
+    def step_goal(
+        self, obs: np.ndarray, achieved_goal: np.ndarray, desired_goal: np.ndarray, t: int, explore: bool,
+        rng: np.random.Generator,
+    ) -> np.ndarray:
+        """The goal the acting policy pursues at step t (a batch)."""
+        ...
+
+    def act(self, obs: np.ndarray, goal: np.ndarray, explore: bool, rng: np.random.Generator) -> np.ndarray:
+        """Actions for a batch, with exploration when ``explore``."""
+        ...
+
+    def store(self, episodes: Episodes, rng: np.random.Generator) -> None:
+        """Keep collected episodes for learning."""
+        ...
+
+    def train(self, updates: int, rng: np.random.Generator) -> dict[str, float]:
+        """Run ``updates`` gradient steps (then move the targets) and return mean diagnostics."""
+        ...
+
+    def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
+        """Plain data of everything the agent learned (and, optionally, its replay)."""
+        ...
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore what :meth:`state_dict` returned."""
+        ...
+
+
+class GoalConditionedAgent:
+    """DDPG (``GoalStrategy.none``) or DDPG + HER (``GoalStrategy.future``) toward the task's goal."""
+
+    def __init__(
+        self,
+        learner: DDPGLearner,
+        buffer: EpisodeBuffer,
+        reward_fn: RewardFn,
+        noise: ActionNoise,
+        strategy: GoalStrategy,
+        replay_k: int,
+    ) -> None:
+        self.learner = learner
+        self.buffer = buffer
+        self.reward_fn = reward_fn
+        self.noise = noise
+        self.relabel_prob = relabel_probability(strategy, replay_k)
+
+    def step_goal(
+        self, obs: np.ndarray, achieved_goal: np.ndarray, desired_goal: np.ndarray, t: int, explore: bool,
+        rng: np.random.Generator,
+    ) -> np.ndarray:
+        return desired_goal
+
+    def act(self, obs: np.ndarray, goal: np.ndarray, explore: bool, rng: np.random.Generator) -> np.ndarray:
+        action = self.learner.act(obs, goal)
+        return self.noise(action, rng) if explore else action
+
+    def store(self, episodes: Episodes, rng: np.random.Generator) -> None:
+        self.buffer.add(episodes)
+        # Normalise with the goals the learner will be trained on, relabelled ones included.
+        sample = sample_transitions(
+            episodes, episodes.action.size // episodes.action.shape[-1], rng, self.relabel_prob, self.reward_fn
+        )
+        self.learner.update_normalizers(sample.obs, sample.goal)
+
+    def train(self, updates: int, rng: np.random.Generator) -> dict[str, float]:
+        stored = self.buffer.stored()
+        totals: dict[str, float] = {}
+        for _ in range(updates):
+            batch = sample_transitions(
+                stored, self.learner.config.batch_size, rng, self.relabel_prob, self.reward_fn
+            )
+            for name, value in self.learner.update(batch).items():
+                totals[name] = totals.get(name, 0.0) + value
+        self.learner.update_target()
+        return {name: value / updates for name, value in totals.items()} if updates else {}
+
+    def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
+        state: dict[str, Any] = {"learner": self.learner.state_dict()}
+        if include_replay:
+            state["buffer"] = self.buffer.state_dict()
+        return state
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.learner.load_state_dict(state["learner"])
+        if "buffer" in state:
+            self.buffer.load_state_dict(state["buffer"])

@@ -1,0 +1,75 @@
+"""Replay storage shaped as whole episodes, so that relabelling is one vectorised index."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+
+from dtd.records import Episodes
+
+_FIELDS = Episodes._fields
+
+
+class EpisodeBuffer:
+    """A ring of whole episodes; when full, the oldest episode is overwritten first."""
+
+    def __init__(self, capacity: int, horizon: int, obs_dim: int, goal_dim: int, action_dim: int) -> None:
+        if capacity < 1:
+            raise ValueError("an episode buffer holds at least one episode")
+        self.capacity = capacity
+        self.horizon = horizon
+        self._data = Episodes(
+            obs=np.zeros((capacity, horizon + 1, obs_dim), dtype=np.float32),
+            achieved_goal=np.zeros((capacity, horizon + 1, goal_dim), dtype=np.float32),
+            action=np.zeros((capacity, horizon, action_dim), dtype=np.float32),
+            step_goal=np.zeros((capacity, horizon, goal_dim), dtype=np.float32),
+            desired_goal=np.zeros((capacity, goal_dim), dtype=np.float32),
+            success=np.zeros((capacity,), dtype=np.float32),
+        )
+        self.size = 0
+        self.next_index = 0
+        self.episodes_added = 0
+
+    @classmethod
+    def for_transitions(
+        cls, transitions: int, horizon: int, obs_dim: int, goal_dim: int, action_dim: int
+    ) -> EpisodeBuffer:
+        """A buffer holding ``transitions`` steps' worth of whole episodes (at least one)."""
+        return cls(max(1, transitions // horizon), horizon, obs_dim, goal_dim, action_dim)
+
+    def add(self, episodes: Episodes) -> None:
+        """Store a batch of episodes, wrapping around when full."""
+        count = episodes.count
+        slots = (self.next_index + np.arange(count)) % self.capacity
+        for name in _FIELDS:
+            getattr(self._data, name)[slots] = getattr(episodes, name)
+        self.next_index = int((self.next_index + count) % self.capacity)
+        self.size = min(self.capacity, self.size + count)
+        self.episodes_added += count
+
+    def stored(self) -> Episodes:
+        """Views of the stored episodes (in slot order, not age order)."""
+        return Episodes(*(array[: self.size] for array in self._data))
+
+    def state_dict(self) -> dict[str, Any]:
+        """Plain data: the stored episodes and the ring's position."""
+        return {
+            "capacity": self.capacity,
+            "size": self.size,
+            "next_index": self.next_index,
+            "episodes_added": self.episodes_added,
+            "data": {name: torch.from_numpy(array.copy()) for name, array in zip(_FIELDS, self.stored(), strict=True)},
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore what :meth:`state_dict` returned, into a buffer of the same shape."""
+        if state["capacity"] != self.capacity:
+            raise ValueError(f"buffer capacity {state['capacity']} differs from {self.capacity}")
+        size = int(state["size"])
+        for name in _FIELDS:
+            getattr(self._data, name)[:size] = state["data"][name].numpy()
+        self.size = size
+        self.next_index = int(state["next_index"])
+        self.episodes_added = int(state["episodes_added"])

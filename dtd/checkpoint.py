@@ -1,0 +1,36 @@
+"""Checkpoints as plain data, written atomically: a crash leaves the old file or the new one."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from dtd.atomic import write_atomic
+from dtd.errors import CheckpointError
+
+FORMAT_VERSION = 1
+
+
+def save_atomic(path: Path, state: dict[str, Any]) -> None:
+    """Write ``state`` (plus the format version) to ``path`` atomically."""
+    write_atomic(path, lambda file: torch.save({"format_version": FORMAT_VERSION, **state}, file))
+
+
+def load_checkpoint(path: Path) -> dict[str, Any]:
+    """Read a checkpoint written by :func:`save_atomic`, or raise :class:`CheckpointError`."""
+    if not path.is_file():
+        raise CheckpointError(f"no checkpoint at {path}")
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:
+        raise CheckpointError(f"checkpoint {path} is corrupt or unreadable ({type(exc).__name__})") from exc
+    if not isinstance(state, dict) or "format_version" not in state:
+        raise CheckpointError(f"{path} is not a dtd checkpoint")
+    if state["format_version"] != FORMAT_VERSION:
+        raise CheckpointError(
+            f"checkpoint {path} has format version {state['format_version']}; "
+            f"this dtd reads version {FORMAT_VERSION}"
+        )
+    return state

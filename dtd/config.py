@@ -1,0 +1,193 @@
+"""The one typed source of configuration: defaults, ``--help`` text and logged settings.
+
+Every field's docstring is its help text on the command line. Facts that follow from the
+environment (dimensions, horizon, the default discount) live in :class:`dtd.envs.EnvSpec`
+and are never written back here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+from typing import Any
+
+from dtd.errors import ConfigError
+
+
+class Algo(enum.Enum):
+    """The agents this package trains."""
+
+    ddpg = "ddpg"
+    """Goal-conditioned DDPG, no relabelling."""
+    her = "her"
+    """DDPG with Hindsight Experience Replay (``future`` strategy)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class LearnerConfig:
+    """Settings of one DDPG learner (actor, critic, their targets and input normalisers)."""
+
+    hidden_sizes: tuple[int, ...] = (256, 256, 256)
+    """Widths of the hidden ReLU layers of actor and critic."""
+    actor_lr: float = 1e-3
+    """Adam learning rate of the actor."""
+    critic_lr: float = 1e-3
+    """Adam learning rate of the critic."""
+    batch_size: int = 256
+    """Transitions per update."""
+    polyak: float = 0.95
+    """Polyak coefficient of the target networks: target <- polyak * target + (1 - polyak) * online."""
+    action_l2: float = 1.0
+    """Weight of the actor's penalty on the squared (scaled) action."""
+    gamma: float | None = None
+    """Discount factor; None means 1 - 1/T with T the episode horizon."""
+    clip_return: bool = True
+    """Clip the critic's target to [-1/(1-gamma), 0], the range of returns of a -1/0 reward."""
+    norm_clip: float = 5.0
+    """Normalised inputs are clipped to [-norm_clip, norm_clip]."""
+    obs_clip: float = 200.0
+    """Raw observations and goals are clipped to [-obs_clip, obs_clip] before normalising."""
+    norm_eps: float = 0.01
+    """Smallest standard deviation the running normalisers divide by."""
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    """A whole training run. Defaults are the reference settings of OpenAI baselines' HER."""
+
+    env: str | None = None
+    """Gymnasium id of a goal-conditioned environment, e.g. FetchPush-v4, or module:EnvId."""
+    algo: Algo = Algo.her
+    """Agent to train."""
+    seed: int = 0
+    """Seed of networks, environments, exploration and replay sampling."""
+    epochs: int = 50
+    """Number of epochs; each ends with an evaluation and a checkpoint."""
+    n_cycles: int = 50
+    """Cycles per epoch; a cycle collects episodes, then updates the learner."""
+    episodes_per_cycle: int = 2
+    """Episodes collected per cycle, one per training environment, stepped together."""
+    updates_per_cycle: int = 40
+    """Gradient updates per cycle; the target networks move once after them."""
+    test_episodes: int = 10
+    """Deterministic evaluation episodes at the end of every epoch."""
+    buffer_size: int = 1_000_000
+    """Replay capacity in transitions (whole episodes are kept)."""
+    replay_k: int = 4
+    """HER: relabelled goals per original one; a fraction k/(k+1) of samples is relabelled."""
+    noise_eps: float = 0.2
+    """Exploration: std of Gaussian action noise, as a fraction of the largest action."""
+    random_eps: float = 0.3
+    """Exploration: probability of taking a uniformly random action instead."""
+    threads: int = 1
+    """Torch threads for the learner; 1 makes runs reproducible bit for bit."""
+    learner: LearnerConfig = LearnerConfig()
+    """Settings of the DDPG learner."""
+
+    def validate(self) -> None:
+        """Raise :class:`ConfigError` naming the first setting that cannot work."""
+        checks: list[tuple[bool, str]] = [
+            (self.env is not None and self.env.strip() != "", "--env is required"),
+            (self.epochs >= 1, f"--epochs must be at least 1, got {self.epochs}"),
+            (self.n_cycles >= 1, f"--n-cycles must be at least 1, got {self.n_cycles}"),
+            (
+                self.episodes_per_cycle >= 1,
+                f"--episodes-per-cycle must be at least 1, got {self.episodes_per_cycle}",
+            ),
+            (
+                self.updates_per_cycle >= 0,
+                f"--updates-per-cycle must be 0 or more, got {self.updates_per_cycle}",
+            ),
+            (
+                self.test_episodes >= 1,
+                f"--test-episodes must be at least 1, got {self.test_episodes}",
+            ),
+            (self.buffer_size >= 1, f"--buffer-size must be at least 1, got {self.buffer_size}"),
+            (self.replay_k >= 0, f"--replay-k must be 0 or more, got {self.replay_k}"),
+            (_finite_in(self.noise_eps, 0, math.inf), f"--noise-eps must be >= 0, got {self.noise_eps}"),
+            (
+                _finite_in(self.random_eps, 0, 1),
+                f"--random-eps must lie in [0, 1], got {self.random_eps}",
+            ),
+            (self.threads >= 1, f"--threads must be at least 1, got {self.threads}"),
+            (self.seed >= 0, f"--seed must be 0 or more, got {self.seed}"),
+        ]
+        learner = self.learner
+        checks += [
+            (
+                len(learner.hidden_sizes) >= 1 and all(h >= 1 for h in learner.hidden_sizes),
+                f"--hidden-sizes must be positive widths, got {learner.hidden_sizes}",
+            ),
+            (_positive(learner.actor_lr), f"--actor-lr must be > 0, got {learner.actor_lr}"),
+            (_positive(learner.critic_lr), f"--critic-lr must be > 0, got {learner.critic_lr}"),
+            (learner.batch_size >= 1, f"--batch-size must be at least 1, got {learner.batch_size}"),
+            (_finite_in(learner.polyak, 0, 1), f"--polyak must lie in [0, 1], got {learner.polyak}"),
+            (
+                _finite_in(learner.action_l2, 0, math.inf),
+                f"--action-l2 must be >= 0, got {learner.action_l2}",
+            ),
+            (
+                learner.gamma is None
+                or (_finite_in(learner.gamma, 0, 1) and learner.gamma > 0),
+                f"--gamma must lie in (0, 1], got {learner.gamma}",
+            ),
+            (_positive(learner.norm_clip), f"--norm-clip must be > 0, got {learner.norm_clip}"),
+            (_positive(learner.obs_clip), f"--obs-clip must be > 0, got {learner.obs_clip}"),
+            (_positive(learner.norm_eps), f"--norm-eps must be > 0, got {learner.norm_eps}"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ConfigError(message)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-ready data (enums as their values)."""
+        return _plain(dataclasses.asdict(self))
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
+        """Inverse of :meth:`to_dict`; unknown keys are an error, missing keys take defaults."""
+        data = dict(data)
+        learner_data = dict(data.pop("learner", {}))
+        _reject_unknown(LearnerConfig, learner_data)
+        _reject_unknown(cls, data)
+        if "hidden_sizes" in learner_data:
+            learner_data["hidden_sizes"] = tuple(learner_data["hidden_sizes"])
+        if "algo" in data:
+            try:
+                data["algo"] = Algo(data["algo"])
+            except ValueError as exc:
+                raise ConfigError(f"unknown algo {data['algo']!r}") from exc
+        return cls(**data, learner=LearnerConfig(**learner_data))
+
+
+def flat_items(config: TrainConfig) -> dict[str, Any]:
+    """Settings as one flat mapping of option names (``learner.`` prefix dropped) to values."""
+    flat = config.to_dict()
+    flat.update(flat.pop("learner"))
+    return flat
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, enum.Enum):
+        return value.value
+    return value
+
+
+def _reject_unknown(cls: type, data: dict[str, Any]) -> None:
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise ConfigError(f"unknown setting(s) in configuration: {', '.join(unknown)}")
+
+
+def _positive(x: float) -> bool:
+    return math.isfinite(x) and x > 0
+
+
+def _finite_in(x: float, low: float, high: float) -> bool:
+    return math.isfinite(x) and low <= x <= high

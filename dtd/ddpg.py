@@ -1,0 +1,139 @@
+"""The one goal-conditioned DDPG learner, used for every agent and at every level."""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from dtd.config import LearnerConfig
+from dtd.networks import Actor, Critic
+from dtd.normalizer import RunningNormalizer
+from dtd.records import Batch
+
+
+class DDPGLearner:
+    """Actor mu(o, g), critic Q(o, g, a), their Polyak targets and the input normalisers.
+
+    Learns from batches it is given; acting with exploration, collecting and relabelling
+    are the caller's concern.
+    """
+
+    def __init__(
+        self,
+        obs_dim: int,
+        goal_dim: int,
+        action_dim: int,
+        action_max: float,
+        config: LearnerConfig,
+        gamma: float,
+    ) -> None:
+        self.config = config
+        self.gamma = gamma
+        # A -1/0 reward per step bounds the return to [-1/(1-gamma), 0].
+        self.return_bounds = (-1.0 / (1.0 - gamma), 0.0) if config.clip_return else (-np.inf, np.inf)
+        self.obs_norm = RunningNormalizer(obs_dim, config.norm_eps, config.norm_clip)
+        self.goal_norm = RunningNormalizer(goal_dim, config.norm_eps, config.norm_clip)
+        input_dim = obs_dim + goal_dim
+        self.actor = Actor(input_dim, action_dim, config.hidden_sizes, action_max)
+        self.critic = Critic(input_dim, action_dim, config.hidden_sizes, action_max)
+        self.actor_target = _frozen_copy(self.actor)
+        self.critic_target = _frozen_copy(self.critic)
+        self.actor_optim = torch.optim.Adam(self.actor.parameters(), lr=config.actor_lr)
+        self.critic_optim = torch.optim.Adam(self.critic.parameters(), lr=config.critic_lr)
+
+    def inputs(self, obs: np.ndarray | torch.Tensor, goal: np.ndarray | torch.Tensor) -> torch.Tensor:
+        """Clipped, normalised o || g as the networks see it."""
+        clip = self.config.obs_clip
+        obs_t = torch.clamp(torch.as_tensor(obs, dtype=torch.float32), -clip, clip)
+        goal_t = torch.clamp(torch.as_tensor(goal, dtype=torch.float32), -clip, clip)
+        return torch.cat([self.obs_norm.normalize(obs_t), self.goal_norm.normalize(goal_t)], dim=-1)
+
+    @torch.no_grad()
+    def act(self, obs: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """Deterministic actions mu(o, g) for a batch."""
+        return self.actor(self.inputs(obs, goal)).numpy()
+
+    @torch.no_grad()
+    def q_values(self, obs: np.ndarray, goal: np.ndarray, action: np.ndarray) -> np.ndarray:
+        """Q(o, g, a) for a batch."""
+        return self.critic(self.inputs(obs, goal), torch.as_tensor(action, dtype=torch.float32)).numpy()
+
+    def update_normalizers(self, obs: np.ndarray, goal: np.ndarray) -> None:
+        """Add observations and goals to the running statistics of the inputs."""
+        clip = self.config.obs_clip
+        self.obs_norm.update(np.clip(obs, -clip, clip))
+        self.goal_norm.update(np.clip(goal, -clip, clip))
+
+    def update(self, batch: Batch) -> dict[str, float]:
+        """One gradient step of critic then actor; returns diagnostics."""
+        inputs = self.inputs(batch.obs, batch.goal)
+        next_inputs = self.inputs(batch.next_obs, batch.goal)
+        action = torch.as_tensor(batch.action, dtype=torch.float32)
+        reward = torch.as_tensor(batch.reward, dtype=torch.float32)
+
+        with torch.no_grad():
+            next_q = self.critic_target(next_inputs, self.actor_target(next_inputs))
+            # Episodes end only by the time limit, so every transition bootstraps.
+            target = torch.clamp(reward + self.gamma * next_q, *self.return_bounds)
+        q = self.critic(inputs, action)
+        critic_loss = torch.mean(torch.square(q - target))
+        self.critic_optim.zero_grad(set_to_none=True)
+        critic_loss.backward()
+        self.critic_optim.step()
+
+        policy_action = self.actor(inputs)
+        action_penalty = torch.mean(torch.square(policy_action / self.actor.action_max))
+        actor_loss = -self.critic(inputs, policy_action).mean() + self.config.action_l2 * action_penalty
+        self.actor_optim.zero_grad(set_to_none=True)
+        actor_loss.backward()
+        self.actor_optim.step()
+
+        return {
+            "critic_loss": critic_loss.item(),
+            "actor_loss": actor_loss.item(),
+            "q_mean": q.detach().mean().item(),
+            "target_mean": target.mean().item(),
+        }
+
+    @torch.no_grad()
+    def update_target(self) -> None:
+        """Move the target networks toward the online ones by 1 - polyak."""
+        weight = 1.0 - self.config.polyak
+        for target, online in ((self.actor_target, self.actor), (self.critic_target, self.critic)):
+            for t_param, param in zip(target.parameters(), online.parameters(), strict=True):
+                t_param.lerp_(param, weight)
+
+    def state_dict(self) -> dict[str, Any]:
+        """Plain data: network, optimiser and normaliser states."""
+        return {
+            "actor": self.actor.state_dict(),
+            "critic": self.critic.state_dict(),
+            "actor_target": self.actor_target.state_dict(),
+            "critic_target": self.critic_target.state_dict(),
+            "actor_optim": self.actor_optim.state_dict(),
+            "critic_optim": self.critic_optim.state_dict(),
+            "obs_norm": self.obs_norm.state_dict(),
+            "goal_norm": self.goal_norm.state_dict(),
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore what :meth:`state_dict` returned."""
+        self.actor.load_state_dict(state["actor"])
+        self.critic.load_state_dict(state["critic"])
+        self.actor_target.load_state_dict(state["actor_target"])
+        self.critic_target.load_state_dict(state["critic_target"])
+        self.actor_optim.load_state_dict(state["actor_optim"])
+        self.critic_optim.load_state_dict(state["critic_optim"])
+        self.obs_norm.load_state_dict(state["obs_norm"])
+        self.goal_norm.load_state_dict(state["goal_norm"])
+
+
+def _frozen_copy(module: nn.Module) -> nn.Module:
+    target = copy.deepcopy(module)
+    for param in target.parameters():
+        param.requires_grad_(False)
+    return target

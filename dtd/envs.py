@@ -1,0 +1,128 @@
+"""Making goal-conditioned environments and describing them with an :class:`EnvSpec`."""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import difflib
+import io
+from collections.abc import Callable
+
+import gymnasium as gym
+import numpy as np
+
+from dtd.errors import EnvError
+
+GOAL_KEYS = ("observation", "achieved_goal", "desired_goal")
+
+RewardFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclasses.dataclass(frozen=True)
+class EnvSpec:
+    """What the agents need to know of an environment, derived once from it."""
+
+    env_id: str
+    obs_dim: int
+    goal_dim: int
+    action_dim: int
+    action_max: float
+    """Actions lie in [-action_max, action_max] in every dimension."""
+    horizon: int
+    """Steps per episode (the environment's time limit), T."""
+
+    def default_gamma(self) -> float:
+        """The reference discount 1 - 1/T."""
+        return 1.0 - 1.0 / self.horizon
+
+
+def register_robotics_envs() -> None:
+    """Register the Gymnasium-Robotics environments (quietly: the package prints a notice)."""
+    with contextlib.redirect_stderr(io.StringIO()):
+        import gymnasium_robotics
+
+    gym.register_envs(gymnasium_robotics)
+
+
+def make_env(env_id: str) -> gym.Env:
+    """Make ``env_id`` (a registered id or ``module:EnvId``) or raise :class:`EnvError`."""
+    register_robotics_envs()
+    try:
+        with contextlib.redirect_stderr(io.StringIO()):
+            return gym.make(env_id, disable_env_checker=True)
+    except ModuleNotFoundError as exc:
+        module = env_id.split(":")[0]
+        raise EnvError(f"cannot import module {module!r} named in environment id {env_id!r}") from exc
+    except gym.error.Error as exc:
+        raise EnvError(_unknown_env_message(env_id)) from exc
+
+
+def _unknown_env_message(env_id: str) -> str:
+    known = list(gym.registry.keys())
+    name = env_id.split(":")[-1]
+    close = difflib.get_close_matches(name, known, n=3, cutoff=0.6)
+    hint = f"; did you mean {', '.join(close)}?" if close else ""
+    return f"unknown environment id {env_id!r}{hint}"
+
+
+def env_spec(env: gym.Env, env_id: str) -> EnvSpec:
+    """Check that ``env`` is goal-conditioned and describe it; raise :class:`EnvError` if not."""
+    space = env.observation_space
+    if not isinstance(space, gym.spaces.Dict) or not all(k in space.spaces for k in GOAL_KEYS):
+        raise EnvError(
+            f"environment {env_id!r} is not goal-conditioned: its observations must be dicts "
+            f"with keys {', '.join(GOAL_KEYS)}"
+        )
+    if not all(isinstance(space[k], gym.spaces.Box) for k in GOAL_KEYS):
+        raise EnvError(f"environment {env_id!r}: observation, achieved_goal and desired_goal must be Boxes")
+    if space["achieved_goal"].shape != space["desired_goal"].shape:
+        raise EnvError(f"environment {env_id!r}: achieved_goal and desired_goal differ in shape")
+    if not callable(getattr(env.unwrapped, "compute_reward", None)):
+        raise EnvError(f"environment {env_id!r} is not goal-conditioned: it has no compute_reward")
+    action_space = env.action_space
+    if not isinstance(action_space, gym.spaces.Box):
+        raise EnvError(f"environment {env_id!r} needs continuous (Box) actions")
+    high = np.asarray(action_space.high, dtype=np.float64)
+    if not np.all(np.isfinite(high)) or not np.allclose(action_space.low, -high) or not np.allclose(high, high.flat[0]):
+        raise EnvError(f"environment {env_id!r} needs actions in a symmetric box [-m, m]")
+    horizon = env.spec.max_episode_steps if env.spec is not None else None
+    if not horizon:
+        raise EnvError(f"environment {env_id!r} has no time limit (max_episode_steps)")
+    spec = EnvSpec(
+        env_id=env_id,
+        obs_dim=int(np.prod(space["observation"].shape)),
+        goal_dim=int(np.prod(space["desired_goal"].shape)),
+        action_dim=int(np.prod(action_space.shape)),
+        action_max=float(high.flat[0]),
+        horizon=int(horizon),
+    )
+    _check_batched_reward(env, spec)
+    return spec
+
+
+def _check_batched_reward(env: gym.Env, spec: EnvSpec) -> None:
+    goals = np.zeros((2, spec.goal_dim))
+    try:
+        rewards = np.asarray(env.unwrapped.compute_reward(goals, goals, None))
+    except Exception as exc:
+        raise EnvError(f"environment {spec.env_id!r}: compute_reward fails on a batch of goals ({exc})") from exc
+    if rewards.shape != (2,):
+        raise EnvError(
+            f"environment {spec.env_id!r}: compute_reward must return one reward per goal of a batch"
+        )
+
+
+def reward_function(env: gym.Env) -> RewardFn:
+    """The environment's batched reward of achieved goals against goals."""
+    compute_reward = env.unwrapped.compute_reward
+
+    def reward(achieved_goal: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        return np.asarray(compute_reward(achieved_goal, goal, None), dtype=np.float32)
+
+    return reward
+
+
+def make_envs(env_id: str, count: int) -> tuple[list[gym.Env], EnvSpec]:
+    """``count`` instances of one environment and its checked spec."""
+    envs = [make_env(env_id) for _ in range(count)]
+    return envs, env_spec(envs[0], env_id)

@@ -1,0 +1,21 @@
+"""Errors a user can cause and fix: the command line prints them as one line and exits 2."""
+
+
+class DtdError(Exception):
+    """A problem with the user's input or files, reported without a traceback."""
+
+
+class ConfigError(DtdError):
+    """A setting that cannot work."""
+
+
+class EnvError(DtdError):
+    """An environment that cannot be made or is not goal-conditioned."""
+
+
+class RunDirError(DtdError):
+    """A run directory that is missing, already used, or holds unreadable files."""
+
+
+class CheckpointError(DtdError):
+    """A checkpoint that is missing, corrupt, or belongs to another run."""

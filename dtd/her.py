@@ -1,0 +1,70 @@
+"""Hindsight Experience Replay as pure, vectorised sampling functions over stored episodes."""
+
+from __future__ import annotations
+
+import enum
+
+import numpy as np
+
+from dtd.envs import RewardFn
+from dtd.records import Batch, Episodes
+
+
+class GoalStrategy(enum.Enum):
+    """Which goals sampled transitions are trained on."""
+
+    none = "none"
+    """The goal the episode was collected with (plain DDPG)."""
+    future = "future"
+    """With probability k/(k+1), a goal achieved later in the same episode."""
+
+
+def relabel_probability(strategy: GoalStrategy, replay_k: int) -> float:
+    """Fraction of sampled transitions whose goal is replaced."""
+    if strategy is GoalStrategy.none:
+        return 0.0
+    return replay_k / (replay_k + 1.0)
+
+
+def future_indices(t: np.ndarray, window_end: np.ndarray, uniform: np.ndarray) -> np.ndarray:
+    """Indices into achieved goals, uniform over t+1 .. window_end (inclusive).
+
+    ``achieved_goal[:, t + 1]`` is what step t reached, so the earliest future goal is
+    that one, and ``window_end`` (T for the whole episode) the last.
+    """
+    span = window_end - t
+    return t + 1 + np.minimum((uniform * span).astype(np.int64), span - 1)
+
+
+def sample_transitions(
+    episodes: Episodes,
+    batch_size: int,
+    rng: np.random.Generator,
+    relabel_prob: float,
+    reward_fn: RewardFn,
+    window_end: np.ndarray | None = None,
+) -> Batch:
+    """Sample transitions uniformly over stored steps, relabel goals, recompute rewards.
+
+    ``window_end[t]`` bounds how far ahead the relabelled goal of step t may come from
+    (default: the episode's end).
+    """
+    count, horizon = episodes.action.shape[:2]
+    episode = rng.integers(0, count, size=batch_size)
+    t = rng.integers(0, horizon, size=batch_size)
+    relabel = rng.random(batch_size) < relabel_prob
+    uniform = rng.random(batch_size)
+
+    end = np.full(batch_size, horizon) if window_end is None else np.asarray(window_end)[t]
+    future = future_indices(t, end, uniform)
+    goal = episodes.step_goal[episode, t].copy()
+    goal[relabel] = episodes.achieved_goal[episode[relabel], future[relabel]]
+    # The reward of step t is earned by the goal it reached: the next achieved goal.
+    reward = reward_fn(episodes.achieved_goal[episode, t + 1], goal)
+    return Batch(
+        obs=episodes.obs[episode, t],
+        goal=goal,
+        action=episodes.action[episode, t],
+        reward=reward,
+        next_obs=episodes.obs[episode, t + 1],
+    )

@@ -1,0 +1,59 @@
+"""Running mean / standard deviation normalisation of network inputs."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+
+class RunningNormalizer:
+    """Normalises vectors by the mean and std of everything it has been shown.
+
+    Statistics are kept in float64 sums so that long runs do not drift; the float32
+    tensors used by the networks are refreshed after every :meth:`update`.
+    """
+
+    def __init__(self, size: int, eps: float = 0.01, clip: float = 5.0) -> None:
+        self.size = size
+        self.eps = eps
+        self.clip = clip
+        self.sum = np.zeros(size, dtype=np.float64)
+        self.sum_sq = np.zeros(size, dtype=np.float64)
+        self.count = 0
+        self.mean = torch.zeros(size)
+        self.std = torch.ones(size)
+
+    def update(self, values: np.ndarray) -> None:
+        """Add a batch of vectors (any leading shape, last dimension ``size``)."""
+        flat = np.asarray(values, dtype=np.float64).reshape(-1, self.size)
+        self.sum += flat.sum(axis=0)
+        self.sum_sq += np.square(flat).sum(axis=0)
+        self.count += flat.shape[0]
+        self._refresh()
+
+    def _refresh(self) -> None:
+        if self.count == 0:
+            return
+        mean = self.sum / self.count
+        var = np.maximum(self.sum_sq / self.count - np.square(mean), 0.0)
+        self.mean = torch.as_tensor(mean, dtype=torch.float32)
+        self.std = torch.as_tensor(np.maximum(np.sqrt(var), self.eps), dtype=torch.float32)
+
+    def normalize(self, values: torch.Tensor) -> torch.Tensor:
+        """(values - mean) / std, clipped to [-clip, clip]."""
+        return torch.clamp((values - self.mean) / self.std, -self.clip, self.clip)
+
+    def state_dict(self) -> dict[str, object]:
+        """Plain data: the sums and the count."""
+        return {
+            "sum": torch.from_numpy(self.sum.copy()),
+            "sum_sq": torch.from_numpy(self.sum_sq.copy()),
+            "count": self.count,
+        }
+
+    def load_state_dict(self, state: dict[str, object]) -> None:
+        """Restore what :meth:`state_dict` returned."""
+        self.sum = np.asarray(state["sum"], dtype=np.float64).copy()
+        self.sum_sq = np.asarray(state["sum_sq"], dtype=np.float64).copy()
+        self.count = int(state["count"])  # type: ignore[arg-type]
+        self._refresh()

@@ -1,0 +1,54 @@
+"""A live progress display of training: epoch, env steps, eval success, steps/s, ETA."""
+
+from __future__ import annotations
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+from dtd.recorder import Row
+
+
+class TrainingProgress:
+    """A rich progress bar over env steps (unless disabled), plus one line per finished epoch."""
+
+    def __init__(self, total_steps: int, epochs: int, enabled: bool = True) -> None:
+        self.epochs = epochs
+        self.console = Console(stderr=True)
+        self.progress = Progress(
+            TextColumn("[bold]epoch {task.fields[epoch]}/{task.fields[epochs]}"),
+            BarColumn(),
+            TextColumn("{task.completed:,.0f}/{task.total:,.0f} steps"),
+            TextColumn("eval {task.fields[eval]}"),
+            TextColumn("{task.fields[rate]} steps/s"),
+            TimeRemainingColumn(),
+            console=self.console,
+            disable=not enabled,
+        )
+        self.task = self.progress.add_task(
+            "train", total=total_steps, epoch=0, epochs=epochs, eval="-", rate="-"
+        )
+
+    def __enter__(self) -> TrainingProgress:
+        self.progress.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.progress.stop()
+
+    def start_at(self, steps: int) -> None:
+        """Show ``steps`` env steps as already done (a resumed run)."""
+        self.progress.update(self.task, completed=steps)
+
+    def advance(self, steps: int, epoch: int, steps_per_s: float) -> None:
+        """Count ``steps`` more env steps during ``epoch`` (1-based)."""
+        self.progress.update(self.task, advance=steps, epoch=epoch, rate=f"{steps_per_s:,.0f}")
+
+    def epoch_done(self, row: Row) -> None:
+        """Show a finished epoch's figures."""
+        self.progress.update(self.task, eval=f"{row['eval_success']:.2f}")
+        self.console.print(
+            f"epoch {int(row['epoch'])}/{self.epochs}  steps {int(row['env_steps']):,}  "
+            f"eval success {row['eval_success']:.3f}  train success {row['train_success']:.3f}  "
+            f"final dist {row['eval_final_distance']:.3f}  wall {row['wall_s']:.0f}s",
+            soft_wrap=True,
+        )

@@ -1,0 +1,44 @@
+"""Typed records that travel between rollout, replay and learner."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+
+class Episodes(NamedTuple):
+    """A batch of B whole episodes of T steps, as collected side by side."""
+
+    obs: np.ndarray
+    """(B, T+1, obs_dim) observations, the last one after the final step."""
+    achieved_goal: np.ndarray
+    """(B, T+1, goal_dim) achieved goals, aligned with ``obs``."""
+    action: np.ndarray
+    """(B, T, action_dim) actions taken."""
+    step_goal: np.ndarray
+    """(B, T, goal_dim) the goal the acting policy was given at each step."""
+    desired_goal: np.ndarray
+    """(B, goal_dim) the task's goal."""
+    success: np.ndarray
+    """(B,) the task's ``is_success`` at the last step, 0 or 1."""
+
+    @property
+    def count(self) -> int:
+        """Number of episodes B."""
+        return self.obs.shape[0]
+
+    def final_distance(self) -> np.ndarray:
+        """(B,) Euclidean distance between the last achieved goal and the task's goal."""
+        return np.linalg.norm(self.achieved_goal[:, -1] - self.desired_goal, axis=-1)
+
+
+class Batch(NamedTuple):
+    """Transitions sampled for one update of a learner."""
+
+    obs: np.ndarray
+    goal: np.ndarray
+    action: np.ndarray
+    reward: np.ndarray
+    """(N,) reward of reaching ``goal`` on the step to ``next_obs``."""
+    next_obs: np.ndarray

@@ -1,0 +1,63 @@
+"""Running whole episodes on a set of environments stepped side by side; learns nothing."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from dtd.agent import Agent
+from dtd.envs import EnvSpec
+from dtd.records import Episodes
+
+
+def run_episodes(
+    envs: Sequence[gym.Env], agent: Agent, spec: EnvSpec, explore: bool, rng: np.random.Generator
+) -> Episodes:
+    """One episode on each environment, acting in lock-step with batched policy calls."""
+    count, horizon = len(envs), spec.horizon
+    obs = np.zeros((count, horizon + 1, spec.obs_dim), dtype=np.float32)
+    achieved = np.zeros((count, horizon + 1, spec.goal_dim), dtype=np.float32)
+    actions = np.zeros((count, horizon, spec.action_dim), dtype=np.float32)
+    step_goals = np.zeros((count, horizon, spec.goal_dim), dtype=np.float32)
+    desired = np.zeros((count, spec.goal_dim), dtype=np.float32)
+    success = np.zeros(count, dtype=np.float32)
+
+    for i, env in enumerate(envs):
+        first, _ = env.reset()
+        obs[i, 0] = first["observation"].ravel()
+        achieved[i, 0] = first["achieved_goal"].ravel()
+        desired[i] = first["desired_goal"].ravel()
+
+    infos: list[dict[str, Any]] = [{} for _ in envs]
+    for t in range(horizon):
+        step_goals[:, t] = agent.step_goal(obs[:, t], achieved[:, t], desired, t, explore, rng)
+        actions[:, t] = agent.act(obs[:, t], step_goals[:, t], explore, rng)
+        for i, env in enumerate(envs):
+            step_obs, _, _, _, infos[i] = env.step(actions[i, t].reshape(env.action_space.shape))
+            obs[i, t + 1] = step_obs["observation"].ravel()
+            achieved[i, t + 1] = step_obs["achieved_goal"].ravel()
+    for i, info in enumerate(infos):
+        success[i] = float(info.get("is_success", 0.0))
+    return Episodes(obs, achieved, actions, step_goals, desired, success)
+
+
+def evaluate(
+    envs: Sequence[gym.Env], agent: Agent, spec: EnvSpec, episodes: int, rng: np.random.Generator
+) -> dict[str, float]:
+    """Deterministic episodes; success is the task's ``is_success`` at the last step."""
+    successes: list[np.ndarray] = []
+    distances: list[np.ndarray] = []
+    remaining = episodes
+    while remaining > 0:
+        used = envs[: min(remaining, len(envs))]
+        batch = run_episodes(used, agent, spec, explore=False, rng=rng)
+        successes.append(batch.success)
+        distances.append(batch.final_distance())
+        remaining -= len(used)
+    return {
+        "success": float(np.mean(np.concatenate(successes), dtype=np.float64)),
+        "final_distance": float(np.mean(np.concatenate(distances), dtype=np.float64)),
+    }

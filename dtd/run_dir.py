@@ -1,0 +1,99 @@
+"""The run directory: a contract between training and every tool that reads its results.
+
+    config.json            resolved configuration and package versions
+    metrics.csv            one row per finished epoch
+    tensorboard/           TensorBoard event files with the same figures
+    checkpoints/latest.pt  everything needed to resume, after the last finished epoch
+    checkpoints/best.pt    the agent with the best evaluation success (no replay)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from dtd.atomic import write_text_atomic
+from dtd.config import TrainConfig
+from dtd.errors import ConfigError, RunDirError
+
+_VERSIONED = ("dtd", "torch", "numpy", "mujoco", "gymnasium", "gymnasium-robotics")
+
+
+@dataclasses.dataclass(frozen=True)
+class RunDir:
+    """Paths inside one run directory."""
+
+    root: Path
+
+    @property
+    def config(self) -> Path:
+        return self.root / "config.json"
+
+    @property
+    def metrics(self) -> Path:
+        return self.root / "metrics.csv"
+
+    @property
+    def tensorboard(self) -> Path:
+        return self.root / "tensorboard"
+
+    @property
+    def checkpoints(self) -> Path:
+        return self.root / "checkpoints"
+
+    @property
+    def latest(self) -> Path:
+        return self.checkpoints / "latest.pt"
+
+    @property
+    def best(self) -> Path:
+        return self.checkpoints / "best.pt"
+
+    def holds_run(self) -> bool:
+        """Whether a run has already started here."""
+        return self.config.exists() or self.metrics.exists() or self.checkpoints.exists()
+
+    def clear(self) -> None:
+        """Remove a previous run's files (only those a run writes)."""
+        for path in (self.config, self.metrics):
+            path.unlink(missing_ok=True)
+        for path in (self.checkpoints, self.tensorboard):
+            shutil.rmtree(path, ignore_errors=True)
+
+    def checkpoint(self, name: str) -> Path:
+        """``latest``, ``best``, or a path to a checkpoint file."""
+        if name in ("latest", "best"):
+            return self.checkpoints / f"{name}.pt"
+        return Path(name)
+
+
+def package_versions() -> dict[str, str]:
+    """Versions of this package and of the libraries that decide its numbers."""
+    versions = {}
+    for name in _VERSIONED:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions
+
+
+def write_config(run: RunDir, config: TrainConfig, derived: dict[str, Any]) -> None:
+    """Write config.json atomically: the configuration, facts derived from the env, versions."""
+    payload = {"config": config.to_dict(), "derived": derived, "versions": package_versions()}
+    write_text_atomic(run.config, json.dumps(payload, indent=2) + "\n")
+
+
+def read_config(run: RunDir) -> TrainConfig:
+    """The configuration a run was started with, or :class:`RunDirError`."""
+    if not run.config.is_file():
+        raise RunDirError(f"no run in {run.root} (config.json is missing)")
+    try:
+        payload = json.loads(run.config.read_text())
+        return TrainConfig.from_dict(payload["config"])
+    except (json.JSONDecodeError, KeyError, TypeError, ConfigError) as exc:
+        raise RunDirError(f"{run.config} is unreadable ({exc})") from exc

@@ -1,0 +1,200 @@
+"""Runs as a user sees them: start, resume and evaluate, with every piece built in one place."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from dtd.agent import Agent, GoalConditionedAgent
+from dtd.buffer import EpisodeBuffer
+from dtd.checkpoint import load_checkpoint
+from dtd.config import Algo, TrainConfig, flat_items
+from dtd.ddpg import DDPGLearner
+from dtd.envs import EnvSpec, make_envs, reward_function
+from dtd.errors import CheckpointError, ConfigError, RunDirError
+from dtd.exploration import ActionNoise
+from dtd.her import GoalStrategy
+from dtd.progress import TrainingProgress
+from dtd.recorder import MetricsRecorder
+from dtd.rollout import evaluate
+from dtd.run_dir import RunDir, read_config, write_config
+from dtd.trainer import Trainer, TrainState
+
+# Settings that may change when a run is resumed; any other must stay as the run began.
+RESUMABLE_SETTINGS = frozenset({"epochs", "threads"})
+
+
+@dataclasses.dataclass
+class Components:
+    """Everything a run is made of, built from its configuration."""
+
+    spec: EnvSpec
+    agent: Agent
+    train_envs: list[gym.Env]
+    eval_envs: list[gym.Env]
+    rng: np.random.Generator
+
+
+def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env) -> Agent:
+    """The agent ``config.algo`` names, with fresh networks and an empty replay."""
+    gamma = config.learner.gamma if config.learner.gamma is not None else spec.default_gamma()
+    learner = DDPGLearner(spec.obs_dim, spec.goal_dim, spec.action_dim, spec.action_max, config.learner, gamma)
+    buffer = EpisodeBuffer.for_transitions(
+        config.buffer_size, spec.horizon, spec.obs_dim, spec.goal_dim, spec.action_dim
+    )
+    noise = ActionNoise(config.noise_eps, config.random_eps, spec.action_max)
+    strategy = GoalStrategy.future if config.algo is Algo.her else GoalStrategy.none
+    return GoalConditionedAgent(learner, buffer, reward_function(env), noise, strategy, config.replay_k)
+
+
+def build(config: TrainConfig, eval_seed: int | None = None, eval_envs: int | None = None) -> Components:
+    """Environments, agent and random generator for ``config``, all seeded from ``config.seed``.
+
+    ``eval_seed`` seeds the evaluation environments apart from training (``dtd eval``).
+    """
+    config.validate()
+    assert config.env is not None
+    torch.set_num_threads(config.threads)
+    torch.manual_seed(config.seed)
+    train_seq, eval_seq, rng_seq = np.random.SeedSequence(config.seed).spawn(3)
+    if eval_seed is not None:
+        eval_seq = np.random.SeedSequence([eval_seed, 1])
+    n_eval = eval_envs or min(config.test_episodes, config.episodes_per_cycle)
+    train, spec = make_envs(config.env, config.episodes_per_cycle)
+    evaluation, _ = make_envs(config.env, n_eval)
+    if config.buffer_size < spec.horizon:
+        raise ConfigError(f"--buffer-size must hold one episode ({spec.horizon} steps), got {config.buffer_size}")
+    for envs, seq in ((train, train_seq), (evaluation, eval_seq)):
+        for env, seed in zip(envs, seq.generate_state(len(envs)), strict=True):
+            env.reset(seed=int(seed))
+    agent = build_agent(config, spec, train[0])
+    return Components(spec, agent, train, evaluation, np.random.default_rng(rng_seq))
+
+
+def default_run_dir(config: TrainConfig) -> Path:
+    """runs/<env>-<algo>-s<seed>."""
+    env = (config.env or "env").split(":")[-1]
+    return Path("runs") / f"{env}-{config.algo.value}-s{config.seed}"
+
+
+def check_checkpoint(snapshot: dict[str, Any], config: TrainConfig, spec: EnvSpec, path: Path) -> None:
+    """Refuse a checkpoint written for another environment or agent."""
+    if snapshot.get("env_id") != config.env or snapshot.get("algo") != config.algo.value:
+        raise CheckpointError(
+            f"checkpoint {path} belongs to a {snapshot.get('algo')} run on {snapshot.get('env_id')}, "
+            f"not to this {config.algo.value} run on {config.env}"
+        )
+    if snapshot.get("spec") != dataclasses.asdict(spec):
+        raise CheckpointError(f"checkpoint {path} was written for an environment of other dimensions")
+
+
+def resumed_config(stored: TrainConfig, given: TrainConfig) -> TrainConfig:
+    """The stored configuration, with the settings the user changed on the command line.
+
+    A setting counts as given when it differs from the default; only RESUMABLE_SETTINGS
+    may differ from the stored run.
+    """
+    defaults, stored_flat, given_flat = flat_items(TrainConfig()), flat_items(stored), flat_items(given)
+    changes: dict[str, Any] = {}
+    for name, value in given_flat.items():
+        if value == defaults[name] or value == stored_flat[name]:
+            continue
+        if name not in RESUMABLE_SETTINGS:
+            raise ConfigError(
+                f"--{name.replace('_', '-')} cannot change when resuming (the run has {stored_flat[name]!r}); "
+                f"only {', '.join('--' + s for s in sorted(RESUMABLE_SETTINGS))} can"
+            )
+        changes[name] = value
+    return dataclasses.replace(stored, **changes)
+
+
+def train(
+    config: TrainConfig,
+    run_dir: Path | None = None,
+    resume: Path | None = None,
+    force: bool = False,
+    show_progress: bool = True,
+) -> TrainState:
+    """Start a run (or, with ``resume``, continue one) and train it to the end."""
+    if resume is not None:
+        run = RunDir(resume)
+        if run_dir is not None and Path(run_dir).resolve() != run.root.resolve():
+            raise ConfigError("give the run directory once: --resume DIR (without --run-dir)")
+        config = resumed_config(read_config(run), config)
+        config.validate()
+        components = build(config)
+        snapshot = load_checkpoint(run.latest) if run.latest.exists() else None
+        if snapshot is not None:
+            check_checkpoint(snapshot, config, components.spec, run.latest)
+    else:
+        config.validate()
+        run = RunDir(Path(run_dir) if run_dir is not None else default_run_dir(config))
+        if run.holds_run() and not force:
+            raise RunDirError(
+                f"{run.root} already holds a run; continue it with --resume {run.root} "
+                "or replace it with --force"
+            )
+        components = build(config)
+        snapshot = None
+        if force:
+            run.clear()
+
+    write_config(run, config, {"spec": dataclasses.asdict(components.spec)})
+    # TensorBoard events past the checkpoint came from an epoch that did not finish.
+    recorder = MetricsRecorder(run, resume_step=snapshot["state"]["env_steps"] + 1 if snapshot else 0)
+    total_steps = config.epochs * config.n_cycles * config.episodes_per_cycle * components.spec.horizon
+    try:
+        with TrainingProgress(total_steps, config.epochs, enabled=show_progress) as progress:
+            trainer = Trainer(
+                config, components.spec, components.agent, components.train_envs,
+                components.eval_envs, components.rng, run, recorder, progress,
+            )
+            state = trainer.restore(snapshot) if snapshot is not None else TrainState()
+            # metrics.csv is rebuilt from the checkpoint: rows of an unfinished epoch vanish.
+            recorder.write_csv(state.history)
+            progress.start_at(state.env_steps)
+            return trainer.train(state)
+    finally:
+        recorder.close()
+        close_all(components)
+
+
+def evaluate_run(run_dir: Path, episodes: int, checkpoint: str, seed: int) -> dict[str, Any]:
+    """Deterministic episodes of a trained agent; the figures as a dict."""
+    if episodes < 1:
+        raise ConfigError(f"--episodes must be at least 1, got {episodes}")
+    run = RunDir(run_dir)
+    config = read_config(run)
+    path = run.checkpoint(checkpoint)
+    snapshot = load_checkpoint(path)
+    components = build(config, eval_seed=seed, eval_envs=min(episodes, 10))
+    check_checkpoint(snapshot, config, components.spec, path)
+    agent_state = {k: v for k, v in snapshot["agent"].items() if k != "buffer"}
+    components.agent.load_state_dict(agent_state)
+    try:
+        result = evaluate(components.eval_envs, components.agent, components.spec, episodes, components.rng)
+    finally:
+        close_all(components)
+    return {
+        "run_dir": str(run.root),
+        "checkpoint": str(path),
+        "env": config.env,
+        "algo": config.algo.value,
+        "epoch": snapshot["state"]["epoch"],
+        "env_steps": snapshot["state"]["env_steps"],
+        "episodes": episodes,
+        "seed": seed,
+        "success_rate": result["success"],
+        "mean_final_distance": result["final_distance"],
+    }
+
+
+def close_all(components: Components) -> None:
+    """Close every environment of ``components``."""
+    for env in components.train_envs + components.eval_envs:
+        env.close()

@@ -1,0 +1,150 @@
+"""The training loop: epochs of (collect, store, update) cycles, evaluation, checkpoint, metrics.
+
+Every collaborator is built elsewhere and passed in; the trainer is the only writer of files.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from dtd.agent import Agent
+from dtd.checkpoint import save_atomic
+from dtd.config import TrainConfig
+from dtd.envs import EnvSpec
+from dtd.progress import TrainingProgress
+from dtd.recorder import MetricsRecorder, Row
+from dtd.rollout import evaluate, run_episodes
+from dtd.run_dir import RunDir
+
+
+@dataclasses.dataclass
+class TrainState:
+    """Counters of a run, saved in every checkpoint."""
+
+    epoch: int = 0
+    """Epochs finished."""
+    env_steps: int = 0
+    updates: int = 0
+    episodes: int = 0
+    wall_s: float = 0.0
+    best_eval_success: float = -1.0
+    history: list[Row] = dataclasses.field(default_factory=list)
+
+
+def env_rng_states(envs: Sequence[gym.Env]) -> list[dict[str, Any]]:
+    """The random state of each environment (it draws initial states and goals)."""
+    return [env.unwrapped.np_random.bit_generator.state for env in envs]
+
+
+def restore_env_rng_states(envs: Sequence[gym.Env], states: Sequence[dict[str, Any]]) -> None:
+    """Inverse of :func:`env_rng_states`."""
+    for env, state in zip(envs, states, strict=True):
+        env.unwrapped.np_random.bit_generator.state = state
+
+
+class Trainer:
+    """Runs epochs from a :class:`TrainState` to ``config.epochs``."""
+
+    def __init__(
+        self,
+        config: TrainConfig,
+        spec: EnvSpec,
+        agent: Agent,
+        train_envs: Sequence[gym.Env],
+        eval_envs: Sequence[gym.Env],
+        rng: np.random.Generator,
+        run: RunDir,
+        recorder: MetricsRecorder,
+        progress: TrainingProgress,
+    ) -> None:
+        self.config = config
+        self.spec = spec
+        self.agent = agent
+        self.train_envs = train_envs
+        self.eval_envs = eval_envs
+        self.rng = rng
+        self.run = run
+        self.recorder = recorder
+        self.progress = progress
+
+    def train(self, state: TrainState) -> TrainState:
+        """Train until ``config.epochs`` epochs are finished; checkpoint after each one."""
+        config = self.config
+        for epoch in range(state.epoch + 1, config.epochs + 1):
+            start = time.perf_counter()
+            sums: dict[str, float] = {}
+            successes: list[np.ndarray] = []
+            distances: list[np.ndarray] = []
+            for _ in range(config.n_cycles):
+                episodes = run_episodes(self.train_envs, self.agent, self.spec, explore=True, rng=self.rng)
+                self.agent.store(episodes, self.rng)
+                for name, value in self.agent.train(config.updates_per_cycle, self.rng).items():
+                    sums[name] = sums.get(name, 0.0) + value
+                successes.append(episodes.success)
+                distances.append(episodes.final_distance())
+                steps = episodes.count * self.spec.horizon
+                state.env_steps += steps
+                state.episodes += episodes.count
+                state.updates += config.updates_per_cycle
+                rate = steps * len(successes) / (time.perf_counter() - start)
+                self.progress.advance(steps, epoch, rate)
+            evaluation = evaluate(self.eval_envs, self.agent, self.spec, config.test_episodes, self.rng)
+            state.wall_s += time.perf_counter() - start
+            state.epoch = epoch
+            row: Row = {
+                "epoch": epoch,
+                "env_steps": state.env_steps,
+                "updates": state.updates,
+                "episodes": state.episodes,
+                "wall_s": round(state.wall_s, 3),
+                "eval_success": evaluation["success"],
+                "train_success": float(np.mean(np.concatenate(successes), dtype=np.float64)),
+                "eval_final_distance": evaluation["final_distance"],
+                "train_final_distance": float(np.mean(np.concatenate(distances), dtype=np.float64)),
+                **{name: total / config.n_cycles for name, total in sums.items()},
+            }
+            state.history.append(row)
+            self._save(state, improved=row["eval_success"] > state.best_eval_success)
+            self.recorder.write_csv(state.history)
+            self.recorder.log(row)
+            self.progress.epoch_done(row)
+        return state
+
+    def _save(self, state: TrainState, improved: bool) -> None:
+        if improved:
+            state.best_eval_success = state.history[-1]["eval_success"]
+            save_atomic(self.run.best, self.snapshot(state, include_replay=False))
+        save_atomic(self.run.latest, self.snapshot(state, include_replay=True))
+
+    def snapshot(self, state: TrainState, include_replay: bool) -> dict[str, Any]:
+        """Everything needed to continue exactly where ``state`` stands."""
+        return {
+            "env_id": self.spec.env_id,
+            "algo": self.config.algo.value,
+            "spec": dataclasses.asdict(self.spec),
+            "config": self.config.to_dict(),
+            "state": dataclasses.asdict(state),
+            "agent": self.agent.state_dict(include_replay=include_replay),
+            "rng": {
+                "numpy": self.rng.bit_generator.state,
+                "torch": torch.get_rng_state(),
+                "train_envs": env_rng_states(self.train_envs),
+                "eval_envs": env_rng_states(self.eval_envs),
+            },
+        }
+
+    def restore(self, snapshot: dict[str, Any]) -> TrainState:
+        """Load a :meth:`snapshot` (with replay) and return its counters."""
+        self.agent.load_state_dict(snapshot["agent"])
+        self.rng.bit_generator.state = snapshot["rng"]["numpy"]
+        torch.set_rng_state(snapshot["rng"]["torch"])
+        restore_env_rng_states(self.train_envs, snapshot["rng"]["train_envs"])
+        restore_env_rng_states(self.eval_envs, snapshot["rng"]["eval_envs"])
+        return TrainState(**snapshot["state"])
