@@ -24,7 +24,9 @@ from dtd.runs import train
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--env", default="FetchPush-v4")
     parser.add_argument("--algo", default="her", choices=[a.value for a in Algo])
     parser.add_argument("--seed", type=int, default=0)
@@ -49,8 +51,10 @@ def report(run: RunDir, marks: list[int], config: TrainConfig) -> None:
     """Print eval success and wall time at each mark (the first epoch at or past it)."""
     with open(run.metrics) as file:
         rows = [{k: float(v) for k, v in row.items()} for row in csv.DictReader(file)]
-    print(f"# {config.algo.value} on {config.env}, seed {config.seed}, {torch.get_num_threads()} torch thread(s), "
-          f"{platform.processor() or platform.machine()}")
+    print(
+        f"# {config.algo.value} on {config.env}, seed {config.seed}, "
+        f"{torch.get_num_threads()} torch thread(s), {platform.processor() or platform.machine()}"
+    )
     print(f"{'env_steps':>10} {'eval_success':>12} {'best_so_far':>11} {'wall_s':>8}")
     for mark in marks:
         reached = [row for row in rows if row["env_steps"] >= mark]

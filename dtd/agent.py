@@ -18,7 +18,12 @@ class Agent(Protocol):
     """What the rollout and the trainer need of an agent."""
 
     def step_goal(
-        self, obs: np.ndarray, achieved_goal: np.ndarray, desired_goal: np.ndarray, t: int, explore: bool,
+        self,
+        obs: np.ndarray,
+        achieved_goal: np.ndarray,
+        desired_goal: np.ndarray,
+        t: int,
+        explore: bool,
         rng: np.random.Generator,
     ) -> np.ndarray:
         """The goal the acting policy pursues at step t (a batch)."""
@@ -64,7 +69,12 @@ class GoalConditionedAgent:
         self.relabel_prob = relabel_probability(strategy, replay_k)
 
     def step_goal(
-        self, obs: np.ndarray, achieved_goal: np.ndarray, desired_goal: np.ndarray, t: int, explore: bool,
+        self,
+        obs: np.ndarray,
+        achieved_goal: np.ndarray,
+        desired_goal: np.ndarray,
+        t: int,
+        explore: bool,
         rng: np.random.Generator,
     ) -> np.ndarray:
         return desired_goal
@@ -77,7 +87,11 @@ class GoalConditionedAgent:
         self.buffer.add(episodes)
         # Normalise with the goals the learner will be trained on, relabelled ones included.
         sample = sample_transitions(
-            episodes, episodes.action.size // episodes.action.shape[-1], rng, self.relabel_prob, self.reward_fn
+            episodes,
+            episodes.action.size // episodes.action.shape[-1],
+            rng,
+            self.relabel_prob,
+            self.reward_fn,
         )
         self.learner.update_normalizers(sample.obs, sample.goal)
 

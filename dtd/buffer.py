@@ -60,7 +60,10 @@ class EpisodeBuffer:
             "size": self.size,
             "next_index": self.next_index,
             "episodes_added": self.episodes_added,
-            "data": {name: torch.from_numpy(array.copy()) for name, array in zip(_FIELDS, self.stored(), strict=True)},
+            "data": {
+                name: torch.from_numpy(array.copy())
+                for name, array in zip(_FIELDS, self.stored(), strict=True)
+            },
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:

@@ -28,7 +28,7 @@ def train(
     Args:
         config: The run's settings.
         run_dir: Where the run's files go (default: runs/<env>-<algo>-s<seed>).
-        resume: Continue the run in this directory from its last finished epoch (settings come from its config.json; only --epochs and --threads may change).
+        resume: Continue the run in this directory after its last finished epoch; --epochs may grow.
         force: Replace a run that already exists in --run-dir.
         progress: Show a live progress bar.
     """
@@ -66,8 +66,6 @@ def evaluate(
     from dtd.runs import evaluate_run
 
     print(json.dumps(evaluate_run(run_dir, episodes, checkpoint, seed)))
-
-
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -128,8 +128,7 @@ class TrainConfig:
                 f"--action-l2 must be >= 0, got {learner.action_l2}",
             ),
             (
-                learner.gamma is None
-                or (_finite_in(learner.gamma, 0, 1) and learner.gamma > 0),
+                learner.gamma is None or (_finite_in(learner.gamma, 0, 1) and learner.gamma > 0),
                 f"--gamma must lie in (0, 1], got {learner.gamma}",
             ),
             (_positive(learner.norm_clip), f"--norm-clip must be > 0, got {learner.norm_clip}"),

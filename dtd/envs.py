@@ -83,7 +83,11 @@ def env_spec(env: gym.Env, env_id: str) -> EnvSpec:
     if not isinstance(action_space, gym.spaces.Box):
         raise EnvError(f"environment {env_id!r} needs continuous (Box) actions")
     high = np.asarray(action_space.high, dtype=np.float64)
-    if not np.all(np.isfinite(high)) or not np.allclose(action_space.low, -high) or not np.allclose(high, high.flat[0]):
+    if (
+        not np.all(np.isfinite(high))
+        or not np.allclose(action_space.low, -high)
+        or not np.allclose(high, high.flat[0])
+    ):
         raise EnvError(f"environment {env_id!r} needs actions in a symmetric box [-m, m]")
     horizon = env.spec.max_episode_steps if env.spec is not None else None
     if not horizon:
@@ -105,7 +109,9 @@ def _check_batched_reward(env: gym.Env, spec: EnvSpec) -> None:
     try:
         rewards = np.asarray(env.unwrapped.compute_reward(goals, goals, None))
     except Exception as exc:
-        raise EnvError(f"environment {spec.env_id!r}: compute_reward fails on a batch of goals ({exc})") from exc
+        raise EnvError(
+            f"environment {spec.env_id!r}: compute_reward fails on a batch of goals ({exc})"
+        ) from exc
     if rewards.shape != (2,):
         raise EnvError(
             f"environment {spec.env_id!r}: compute_reward must return one reward per goal of a batch"

@@ -1,10 +1,10 @@
 """The run directory: a contract between training and every tool that reads its results.
 
-    config.json            resolved configuration and package versions
-    metrics.csv            one row per finished epoch
-    tensorboard/           TensorBoard event files with the same figures
-    checkpoints/latest.pt  everything needed to resume, after the last finished epoch
-    checkpoints/best.pt    the agent with the best evaluation success (no replay)
+config.json            resolved configuration and package versions
+metrics.csv            one row per finished epoch
+tensorboard/           TensorBoard event files with the same figures
+checkpoints/latest.pt  everything needed to resume, after the last finished epoch
+checkpoints/best.pt    the agent with the best evaluation success (no replay)
 """
 
 from __future__ import annotations

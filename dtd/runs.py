@@ -27,6 +27,7 @@ from dtd.trainer import Trainer, TrainState
 
 # Settings that may change when a run is resumed; any other must stay as the run began.
 RESUMABLE_SETTINGS = frozenset({"epochs", "threads"})
+_RESUMABLE_FLAGS = ", ".join("--" + name for name in sorted(RESUMABLE_SETTINGS))
 
 
 @dataclasses.dataclass
@@ -43,7 +44,9 @@ class Components:
 def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env) -> Agent:
     """The agent ``config.algo`` names, with fresh networks and an empty replay."""
     gamma = config.learner.gamma if config.learner.gamma is not None else spec.default_gamma()
-    learner = DDPGLearner(spec.obs_dim, spec.goal_dim, spec.action_dim, spec.action_max, config.learner, gamma)
+    learner = DDPGLearner(
+        spec.obs_dim, spec.goal_dim, spec.action_dim, spec.action_max, config.learner, gamma
+    )
     buffer = EpisodeBuffer.for_transitions(
         config.buffer_size, spec.horizon, spec.obs_dim, spec.goal_dim, spec.action_dim
     )
@@ -68,7 +71,9 @@ def build(config: TrainConfig, eval_seed: int | None = None, eval_envs: int | No
     train, spec = make_envs(config.env, config.episodes_per_cycle)
     evaluation, _ = make_envs(config.env, n_eval)
     if config.buffer_size < spec.horizon:
-        raise ConfigError(f"--buffer-size must hold one episode ({spec.horizon} steps), got {config.buffer_size}")
+        raise ConfigError(
+            f"--buffer-size must hold one episode ({spec.horizon} steps), got {config.buffer_size}"
+        )
     for envs, seq in ((train, train_seq), (evaluation, eval_seq)):
         for env, seed in zip(envs, seq.generate_state(len(envs)), strict=True):
             env.reset(seed=int(seed))
@@ -106,8 +111,8 @@ def resumed_config(stored: TrainConfig, given: TrainConfig) -> TrainConfig:
             continue
         if name not in RESUMABLE_SETTINGS:
             raise ConfigError(
-                f"--{name.replace('_', '-')} cannot change when resuming (the run has {stored_flat[name]!r}); "
-                f"only {', '.join('--' + s for s in sorted(RESUMABLE_SETTINGS))} can"
+                f"--{name.replace('_', '-')} cannot change when resuming "
+                f"(the run has {stored_flat[name]!r}); only {_RESUMABLE_FLAGS} can"
             )
         changes[name] = value
     return dataclasses.replace(stored, **changes)
@@ -151,8 +156,15 @@ def train(
     try:
         with TrainingProgress(total_steps, config.epochs, enabled=show_progress) as progress:
             trainer = Trainer(
-                config, components.spec, components.agent, components.train_envs,
-                components.eval_envs, components.rng, run, recorder, progress,
+                config,
+                components.spec,
+                components.agent,
+                components.train_envs,
+                components.eval_envs,
+                components.rng,
+                run,
+                recorder,
+                progress,
             )
             state = trainer.restore(snapshot) if snapshot is not None else TrainState()
             # metrics.csv is rebuilt from the checkpoint: rows of an unfinished epoch vanish.
