@@ -1,0 +1,5 @@
+"""``python -m dtd`` is the ``dtd`` command."""
+
+from dtd.cli import main
+
+main()

@@ -1,0 +1,55 @@
+"""The episode ring: capacity, wrap-around, and whole episodes kept together."""
+
+import numpy as np
+
+from dtd.buffer import EpisodeBuffer
+from dtd.records import Episodes
+
+T, OBS, GOAL, ACT = 4, 3, 2, 2
+
+
+def episodes_numbered(first: int, count: int) -> Episodes:
+    """Episodes whose every entry holds the episode's number."""
+    ids = np.arange(first, first + count, dtype=np.float32)
+
+    def filled(*shape: int) -> np.ndarray:
+        return np.broadcast_to(ids.reshape(-1, *([1] * len(shape))), (count, *shape)).copy()
+
+    return Episodes(
+        filled(T + 1, OBS), filled(T + 1, GOAL), filled(T, ACT), filled(T, GOAL), filled(GOAL), ids.copy()
+    )
+
+
+def test_capacity_in_whole_episodes():
+    assert EpisodeBuffer.for_transitions(1_000_000, 50, OBS, GOAL, ACT).capacity == 20_000
+    assert EpisodeBuffer.for_transitions(10, 50, OBS, GOAL, ACT).capacity == 1
+
+
+def test_wraps_around_overwriting_the_oldest_episodes():
+    buffer = EpisodeBuffer(5, T, OBS, GOAL, ACT)
+    buffer.add(episodes_numbered(0, 3))
+    assert buffer.size == 3
+    buffer.add(episodes_numbered(3, 4))  # 7 episodes into 5 slots: 0 and 1 are gone
+    assert buffer.size == 5 and buffer.next_index == 2 and buffer.episodes_added == 7
+    stored = buffer.stored()
+    assert sorted(stored.success.tolist()) == [2, 3, 4, 5, 6]
+    assert stored.success.tolist() == [5, 6, 2, 3, 4]
+
+
+def test_every_field_of_a_slot_belongs_to_one_episode():
+    buffer = EpisodeBuffer(4, T, OBS, GOAL, ACT)
+    for first in range(0, 11, 3):
+        buffer.add(episodes_numbered(first, 3))
+    for slot, number in enumerate(buffer.stored().success):
+        for field in buffer.stored():
+            assert np.all(field[slot] == number)
+
+
+def test_state_round_trip():
+    buffer = EpisodeBuffer(4, T, OBS, GOAL, ACT)
+    buffer.add(episodes_numbered(0, 6))
+    restored = EpisodeBuffer(4, T, OBS, GOAL, ACT)
+    restored.load_state_dict(buffer.state_dict())
+    for a, b in zip(buffer.stored(), restored.stored(), strict=True):
+        assert np.array_equal(a, b)
+    assert (restored.size, restored.next_index, restored.episodes_added) == (4, 2, 6)

@@ -1,0 +1,75 @@
+"""Configuration validation and round trips; checkpoint files that cannot be read."""
+
+import dataclasses
+
+import pytest
+import torch
+
+from dtd.checkpoint import FORMAT_VERSION, load_checkpoint, save_atomic
+from dtd.config import Algo, LearnerConfig, TrainConfig
+from dtd.errors import CheckpointError, ConfigError
+from dtd.runs import resumed_config
+
+VALID = TrainConfig(env="FetchReach-v4")
+
+
+def test_defaults_are_the_reference_settings():
+    c = TrainConfig()
+    assert (c.n_cycles, c.episodes_per_cycle, c.updates_per_cycle, c.test_episodes) == (50, 2, 40, 10)
+    assert (c.buffer_size, c.replay_k, c.noise_eps, c.random_eps) == (1_000_000, 4, 0.2, 0.3)
+    learner = c.learner
+    assert learner.hidden_sizes == (256, 256, 256) and learner.batch_size == 256
+    assert (learner.actor_lr, learner.critic_lr, learner.polyak, learner.action_l2) == (1e-3, 1e-3, 0.95, 1.0)
+    assert (learner.norm_clip, learner.obs_clip, learner.norm_eps) == (5.0, 200.0, 0.01)
+    assert learner.gamma is None and learner.clip_return
+
+
+@pytest.mark.parametrize(
+    ("change", "flag"),
+    [
+        ({"epochs": 0}, "--epochs"),
+        ({"n_cycles": -1}, "--n-cycles"),
+        ({"random_eps": 1.5}, "--random-eps"),
+        ({"env": None}, "--env"),
+        ({"learner": LearnerConfig(actor_lr=-1e-3)}, "--actor-lr"),
+        ({"learner": LearnerConfig(gamma=1.5)}, "--gamma"),
+        ({"learner": LearnerConfig(polyak=float("nan"))}, "--polyak"),
+        ({"learner": LearnerConfig(hidden_sizes=(0,))}, "--hidden-sizes"),
+    ],
+)
+def test_invalid_settings_name_their_option(change, flag):
+    with pytest.raises(ConfigError, match=flag):
+        dataclasses.replace(VALID, **change).validate()
+
+
+def test_dict_round_trip():
+    config = dataclasses.replace(VALID, algo=Algo.ddpg, learner=LearnerConfig(hidden_sizes=(64, 64)))
+    assert TrainConfig.from_dict(config.to_dict()) == config
+    with pytest.raises(ConfigError, match="typo"):
+        TrainConfig.from_dict({**config.to_dict(), "typo": 1})
+
+
+def test_resume_takes_the_stored_settings_and_allows_more_epochs():
+    stored = dataclasses.replace(VALID, seed=3, n_cycles=7)
+    given = TrainConfig(epochs=80)
+    assert resumed_config(stored, given) == dataclasses.replace(stored, epochs=80)
+    assert resumed_config(stored, TrainConfig(env="FetchReach-v4", seed=3)) == stored
+    with pytest.raises(ConfigError, match="--seed cannot change"):
+        resumed_config(stored, TrainConfig(seed=4))
+
+
+def test_checkpoint_round_trip_and_errors(tmp_path):
+    path = tmp_path / "c.pt"
+    save_atomic(path, {"x": torch.arange(3), "n": 5})
+    state = load_checkpoint(path)
+    assert state["n"] == 5 and state["format_version"] == FORMAT_VERSION
+    assert [p.name for p in tmp_path.iterdir()] == ["c.pt"]  # no temporary file left
+
+    with pytest.raises(CheckpointError, match="no checkpoint"):
+        load_checkpoint(tmp_path / "missing.pt")
+    path.write_bytes(path.read_bytes()[:50])
+    with pytest.raises(CheckpointError, match="corrupt"):
+        load_checkpoint(path)
+    torch.save({"format_version": 99}, path)
+    with pytest.raises(CheckpointError, match="format version 99"):
+        load_checkpoint(path)

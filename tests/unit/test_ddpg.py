@@ -1,0 +1,124 @@
+"""The DDPG learner: updates, targets, and save/load giving the same actions."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+
+from dtd.agent import GoalConditionedAgent
+from dtd.buffer import EpisodeBuffer
+from dtd.checkpoint import load_checkpoint, save_atomic
+from dtd.config import LearnerConfig
+from dtd.ddpg import DDPGLearner
+from dtd.exploration import ActionNoise
+from dtd.her import GoalStrategy
+from dtd.records import Batch, Episodes
+
+OBS, GOAL, ACT, T = 5, 3, 2, 6
+SMALL = LearnerConfig(hidden_sizes=(32, 32), batch_size=16)
+
+
+def make_learner(config: LearnerConfig = SMALL, seed: int = 0) -> DDPGLearner:
+    torch.manual_seed(seed)
+    return DDPGLearner(OBS, GOAL, ACT, action_max=2.0, config=config, gamma=0.9)
+
+
+def random_batch(rng: np.random.Generator, size: int = 16) -> Batch:
+    return Batch(
+        obs=rng.normal(size=(size, OBS)).astype(np.float32),
+        goal=rng.normal(size=(size, GOAL)).astype(np.float32),
+        action=rng.uniform(-2, 2, size=(size, ACT)).astype(np.float32),
+        reward=-rng.integers(0, 2, size=size).astype(np.float32),
+        next_obs=rng.normal(size=(size, OBS)).astype(np.float32),
+    )
+
+
+def random_episodes(rng: np.random.Generator, count: int = 4) -> Episodes:
+    return Episodes(
+        obs=rng.normal(size=(count, T + 1, OBS)).astype(np.float32),
+        achieved_goal=rng.normal(size=(count, T + 1, GOAL)).astype(np.float32),
+        action=rng.uniform(-2, 2, size=(count, T, ACT)).astype(np.float32),
+        step_goal=rng.normal(size=(count, T, GOAL)).astype(np.float32),
+        desired_goal=rng.normal(size=(count, GOAL)).astype(np.float32),
+        success=np.zeros(count, np.float32),
+    )
+
+
+def test_actions_are_bounded_by_the_action_scale():
+    learner = make_learner()
+    actions = learner.act(np.full((8, OBS), 1e3), np.full((8, GOAL), -1e3))
+    assert actions.shape == (8, ACT)
+    assert np.all(np.abs(actions) <= 2.0)
+
+
+def test_an_update_changes_actor_and_critic_but_not_targets():
+    learner = make_learner()
+    before = {
+        name: [p.clone() for p in net.parameters()]
+        for name, net in vars(learner).items()
+        if isinstance(net, torch.nn.Module)
+    }
+    metrics = learner.update(random_batch(np.random.default_rng(0)))
+    assert set(metrics) == {"critic_loss", "actor_loss", "q_mean", "target_mean"}
+    for name, params in before.items():
+        changed = any(
+            not torch.equal(a, b) for a, b in zip(params, getattr(learner, name).parameters(), strict=True)
+        )
+        assert changed == (name in ("actor", "critic")), name
+
+
+def test_target_moves_by_one_minus_polyak():
+    learner = make_learner(dataclasses.replace(SMALL, polyak=0.75))
+    learner.update(random_batch(np.random.default_rng(0)))
+    online = [p.clone() for p in learner.critic.parameters()]
+    target = [p.clone() for p in learner.critic_target.parameters()]
+    learner.update_target()
+    for o, t, new in zip(online, target, learner.critic_target.parameters(), strict=True):
+        assert torch.allclose(new, 0.75 * t + 0.25 * o, atol=1e-6)
+
+
+def test_critic_targets_stay_in_the_return_range():
+    learner = make_learner()
+    with torch.no_grad():  # a critic that wildly overestimates
+        learner.critic_target.body[-1].bias.fill_(1e3)
+    metrics = learner.update(random_batch(np.random.default_rng(0)))
+    assert -1 / (1 - 0.9) <= metrics["target_mean"] <= 0.0
+
+
+@pytest.mark.parametrize("strategy", list(GoalStrategy))
+def test_agent_checkpoint_round_trip_gives_the_same_actions(tmp_path, strategy):
+    rng = np.random.default_rng(0)
+
+    def agent(seed: int) -> GoalConditionedAgent:
+        learner = make_learner(seed=seed)
+        buffer = EpisodeBuffer(10, T, OBS, GOAL, ACT)
+        noise = ActionNoise(0.2, 0.3, 2.0)
+        return GoalConditionedAgent(
+            learner, buffer, lambda a, g: -np.ones(len(a), np.float32), noise, strategy, 4
+        )
+
+    trained = agent(seed=0)
+    trained.store(random_episodes(rng), rng)
+    trained.train(5, rng)
+    save_atomic(tmp_path / "agent.pt", trained.state_dict())
+    restored = agent(seed=1)
+    restored.load_state_dict(load_checkpoint(tmp_path / "agent.pt"))
+
+    obs, goal = rng.normal(size=(7, OBS)), rng.normal(size=(7, GOAL))
+    assert not np.array_equal(agent(seed=1).act(obs, goal, False, rng), trained.act(obs, goal, False, rng))
+    assert np.array_equal(restored.act(obs, goal, False, rng), trained.act(obs, goal, False, rng))
+    # Training goes on identically from the restored state.
+    rng_a, rng_b = np.random.default_rng(5), np.random.default_rng(5)
+    assert trained.train(3, rng_a) == restored.train(3, rng_b)
+    assert np.array_equal(restored.act(obs, goal, False, rng), trained.act(obs, goal, False, rng))
+
+
+def test_exploration_noise_stays_in_bounds_and_takes_random_actions():
+    noise = ActionNoise(noise_eps=0.2, random_eps=0.3, action_max=2.0)
+    rng = np.random.default_rng(0)
+    actions = np.full((10_000, ACT), 1.9, np.float32)
+    noisy = noise(actions, rng)
+    assert np.all(np.abs(noisy) <= 2.0)
+    far = np.abs(noisy - 1.9).max(axis=1) > 1.5  # only a random action lands that far
+    assert 0.2 < far.mean() < 0.3

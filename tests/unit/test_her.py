@@ -1,0 +1,100 @@
+"""HER relabelling: which goals are drawn, from where, and the rewards that go with them."""
+
+import numpy as np
+import pytest
+
+from dtd.her import GoalStrategy, future_indices, relabel_probability, sample_transitions
+from dtd.records import Episodes
+
+T = 10
+
+
+def labelled_episodes(count: int = 3, horizon: int = T) -> Episodes:
+    """Episodes whose every value encodes where it comes from: achieved goal = (episode, t, 0)."""
+    ep = np.arange(count, dtype=np.float32)[:, None]
+    steps = np.arange(horizon + 1, dtype=np.float32)[None, :]
+    achieved = np.stack(
+        [
+            np.broadcast_to(ep, (count, horizon + 1)),
+            np.broadcast_to(steps, (count, horizon + 1)),
+            np.zeros((count, horizon + 1), np.float32),
+        ],
+        axis=-1,
+    )
+    obs = achieved.copy() * 10
+    desired = np.stack([ep[:, 0], np.full(count, -1.0, np.float32), np.ones(count, np.float32)], axis=-1)
+    return Episodes(
+        obs=obs,
+        achieved_goal=achieved,
+        action=obs[:, :-1, :2].copy(),
+        step_goal=np.repeat(desired[:, None], horizon, axis=1),
+        desired_goal=desired,
+        success=np.zeros(count, np.float32),
+    )
+
+
+def exact_reward(achieved: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    return -(np.linalg.norm(achieved - goal, axis=-1) > 1e-6).astype(np.float32)
+
+
+def test_future_indices_lie_after_t_and_inside_the_window():
+    rng = np.random.default_rng(0)
+    t = rng.integers(0, T, size=10_000)
+    future = future_indices(t, np.full_like(t, T), rng.random(t.size))
+    assert np.all(future > t)
+    assert np.all(future <= T)
+    # Every future index is reachable, the last one (the final achieved goal) included.
+    assert set(np.unique(future[t == 0])) == set(range(1, T + 1))
+
+
+def test_future_indices_respect_a_shorter_window():
+    t = np.array([0, 1, 4, 5, 9])
+    window_end = np.array([5, 5, 5, 10, 10])
+    for u in (0.0, 0.5, 0.999999):
+        future = future_indices(t, window_end, np.full(t.size, u))
+        assert np.all(future > t) and np.all(future <= window_end)
+    assert np.all(future_indices(t, window_end, np.full(t.size, 0.999999)) == window_end)
+
+
+def test_relabelled_goals_come_from_later_in_the_same_episode_and_rewards_are_recomputed():
+    episodes = labelled_episodes()
+    batch = sample_transitions(episodes, 5000, np.random.default_rng(1), 0.8, exact_reward)
+    episode_of_obs = batch.obs[:, 0] / 10
+    t_of_obs = batch.obs[:, 1] / 10
+    relabelled = batch.goal[:, 2] == 0  # achieved goals have 0 there, desired goals 1
+    assert 0.77 < relabelled.mean() < 0.83
+    # Same episode, strictly later step, at most the episode's last achieved goal.
+    assert np.all(batch.goal[relabelled, 0] == episode_of_obs[relabelled])
+    assert np.all(batch.goal[relabelled, 1] > t_of_obs[relabelled])
+    assert np.all(batch.goal[relabelled, 1] <= T)
+    # next_obs is the step after obs in the same episode.
+    assert np.all(batch.next_obs[:, 1] / 10 == t_of_obs + 1)
+    assert np.all(batch.next_obs[:, 0] == batch.obs[:, 0])
+    # Reward: 0 exactly when the relabelled goal is the next achieved goal (t + 1).
+    expected = np.where(relabelled & (batch.goal[:, 1] == t_of_obs + 1), 0.0, -1.0)
+    assert np.array_equal(batch.reward, expected)
+    assert np.any(batch.reward == 0)
+
+
+def test_without_relabelling_goals_are_the_episode_goals():
+    episodes = labelled_episodes()
+    p = relabel_probability(GoalStrategy.none, 4)
+    batch = sample_transitions(episodes, 1000, np.random.default_rng(2), p, exact_reward)
+    assert p == 0.0
+    assert np.all(batch.goal == episodes.desired_goal[batch.obs[:, 0].astype(int) // 10])
+    assert np.all(batch.reward == -1.0)
+
+
+def test_window_bounds_relabelled_goals():
+    episodes = labelled_episodes()
+    window_end = np.where(np.arange(T) < 5, 5, T)
+    batch = sample_transitions(episodes, 4000, np.random.default_rng(3), 1.0, exact_reward, window_end)
+    t = batch.obs[:, 1] / 10
+    first_half = t < 5
+    assert np.all(batch.goal[first_half, 1] <= 5)
+    assert np.any(batch.goal[~first_half, 1] > 5)
+
+
+@pytest.mark.parametrize(("k", "p"), [(4, 0.8), (1, 0.5), (0, 0.0)])
+def test_future_probability(k, p):
+    assert relabel_probability(GoalStrategy.future, k) == pytest.approx(p)
