@@ -1,0 +1,113 @@
+"""The command line end to end: the run directory, evaluation, determinism, help."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+
+from dtd.config import TrainConfig, flat_items
+from tests.conftest import TINY, dtd, read_metrics, without_times
+
+pytestmark = pytest.mark.smoke
+
+
+def test_train_fills_the_run_directory(reach_run):
+    config = json.loads((reach_run / "config.json").read_text())
+    assert config["config"]["env"] == "FetchReach-v4" and config["config"]["seed"] == 7
+    assert config["config"]["learner"]["hidden_sizes"] == [32, 32]
+    assert {"dtd", "torch", "mujoco", "gymnasium-robotics"} <= set(config["versions"])
+    assert config["derived"]["spec"]["horizon"] == 50
+
+    rows = read_metrics(reach_run)
+    assert [int(r["epoch"]) for r in rows] == [1, 2, 3]
+    assert [int(r["env_steps"]) for r in rows] == [200, 400, 600]
+    assert [int(r["updates"]) for r in rows] == [10, 20, 30]
+    for column in ("wall_s", "eval_success", "train_success", "critic_loss", "actor_loss", "q_mean",
+                   "eval_final_distance"):  # fmt: skip
+        assert all(r[column] != "" for r in rows), column
+    assert all(0.0 <= float(r["eval_success"]) <= 1.0 for r in rows)
+
+    assert (reach_run / "checkpoints" / "latest.pt").is_file()
+    assert (reach_run / "checkpoints" / "best.pt").is_file()
+    assert list((reach_run / "tensorboard").glob("events.out.tfevents.*"))
+
+
+def test_tensorboard_holds_the_same_figures(reach_run):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    events = EventAccumulator(str(reach_run / "tensorboard"))
+    events.Reload()
+    success = events.Scalars("eval/success")
+    rows = read_metrics(reach_run)
+    assert [e.step for e in success] == [int(r["env_steps"]) for r in rows]
+    assert [e.value for e in success] == pytest.approx([float(r["eval_success"]) for r in rows])
+
+
+def test_eval_prints_one_json_line(reach_run):
+    result = dtd("eval", reach_run, "--episodes", "4")
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.strip().splitlines()
+    assert len(lines) == 1
+    figures = json.loads(lines[0])
+    assert figures["episodes"] == 4 and figures["epoch"] == 3 and figures["env"] == "FetchReach-v4"
+    assert figures["success_rate"] in (0.0, 0.25, 0.5, 0.75, 1.0)
+    assert figures["mean_final_distance"] >= 0.0
+    best = json.loads(dtd("eval", reach_run, "--episodes", "2", "--checkpoint", "best").stdout)
+    assert best["checkpoint"].endswith("best.pt")
+
+
+def test_same_seed_gives_the_same_metrics(reach_run, tmp_path):
+    again = tmp_path / "again"
+    result = dtd("train", "--env", "FetchReach-v4", "--epochs", "3", "--seed", "7", *TINY, "--run-dir", again)
+    assert result.returncode == 0, result.stderr
+    assert without_times(read_metrics(again)) == without_times(read_metrics(reach_run))
+    other_seed = tmp_path / "other"
+    dtd("train", "--env", "FetchReach-v4", "--epochs", "1", "--seed", "8", *TINY, "--run-dir", other_seed)
+    assert read_metrics(other_seed)[0]["critic_loss"] != read_metrics(reach_run)[0]["critic_loss"]
+
+
+def test_resume_extends_a_finished_run_like_a_longer_one(reach_run, tmp_path):
+    short = tmp_path / "short"
+    assert (
+        dtd(
+            "train", "--env", "FetchReach-v4", "--epochs", "2", "--seed", "7", *TINY, "--run-dir", short
+        ).returncode
+        == 0
+    )
+    result = dtd("train", "--resume", short, "--epochs", "3", "--no-progress")
+    assert result.returncode == 0, result.stderr
+    assert without_times(read_metrics(short)) == without_times(read_metrics(reach_run))
+
+
+def test_help_documents_every_setting_with_its_default():
+    text = dtd("train", "--help").stdout
+    flat = re.sub(r"[│\s]+", " ", text)
+    for name in flat_items(TrainConfig()):
+        assert f"--{name.replace('_', '-')}" in flat, name
+    for option in ("--run-dir", "--resume", "--force", "--threads"):
+        assert option in flat
+    assert flat.count("(default:") >= len(flat_items(TrainConfig()))
+    assert "train" in dtd("--help").stdout and "eval" in dtd("--help").stdout
+
+
+@pytest.mark.parametrize(
+    ("env_id", "obs_dim"),
+    [
+        ("FetchPush-v4", 25),
+        ("FetchPickAndPlace-v4", 25),
+        ("FetchSlide-v4", 25),
+        ("HandManipulateBlock-v1", 61),
+        ("gymnasium_robotics:FetchReach-v4", 10),
+    ],
+)
+def test_every_task_of_the_paper_trains(tmp_path, env_id, obs_dim):
+    run_dir = tmp_path / "run"
+    args = ["--n-cycles", "1", "--updates-per-cycle", "2", "--batch-size", "16", "--hidden-sizes", "16",
+            "--test-episodes", "1", "--episodes-per-cycle", "1", "--buffer-size", "1000",
+            "--no-progress"]  # fmt: skip
+    result = dtd("train", "--env", env_id, "--epochs", "1", *args, "--run-dir", run_dir)
+    assert result.returncode == 0, result.stderr
+    assert json.loads((run_dir / "config.json").read_text())["derived"]["spec"]["obs_dim"] == obs_dim
+    assert len(read_metrics(run_dir)) == 1
