@@ -1,0 +1,18 @@
+"""Learning: HER must solve FetchReach on a small, fixed budget and seed."""
+
+from __future__ import annotations
+
+import pytest
+
+from dtd.config import Algo, TrainConfig
+from dtd.runs import evaluate_run, train
+
+pytestmark = pytest.mark.learning
+
+
+def test_her_reaches_90_percent_on_fetch_reach(tmp_path):
+    config = TrainConfig(env="FetchReach-v4", algo=Algo.her, seed=0, epochs=5, n_cycles=10)
+    state = train(config, run_dir=tmp_path / "run", show_progress=False)
+    assert state.env_steps == 5_000
+    figures = evaluate_run(tmp_path / "run", episodes=50, checkpoint="latest", seed=123)
+    assert figures["success_rate"] >= 0.9, figures
