@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import TINY, dtd
+from tests.helpers import TINY, dtd
 
 pytestmark = pytest.mark.smoke
 

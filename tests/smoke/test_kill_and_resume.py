@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import TINY, dtd, read_metrics, without_times
+from tests.helpers import TINY, dtd, read_metrics, without_times
 
 pytestmark = pytest.mark.smoke
 

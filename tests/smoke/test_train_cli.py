@@ -8,7 +8,7 @@ import re
 import pytest
 
 from dtd.config import TrainConfig, flat_items
-from tests.conftest import TINY, dtd, read_metrics, without_times
+from tests.helpers import TINY, dtd, read_metrics, without_times
 
 pytestmark = pytest.mark.smoke
 
