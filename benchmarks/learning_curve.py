@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
+import json
 import math
 import platform
 from pathlib import Path
@@ -34,9 +35,18 @@ def main() -> None:
     parser.add_argument("--marks", default="50000,100000,200000,300000", help="env steps to report at")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--run-dir", type=Path, required=True)
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="any other setting, e.g. low_relabel_window=episode or high.batch_size=128 (JSON values)",
+    )
     args = parser.parse_args()
 
-    base = TrainConfig(env=args.env, algo=Algo(args.algo), seed=args.seed, threads=args.threads)
+    base = with_settings(
+        TrainConfig(env=args.env, algo=Algo(args.algo), seed=args.seed, threads=args.threads), args.set
+    )
     steps_per_epoch = base.n_cycles * base.episodes_per_cycle * _horizon(args.env)
     config = dataclasses.replace(base, epochs=math.ceil(args.steps / steps_per_epoch))
     run = RunDir(args.run_dir)
@@ -47,6 +57,22 @@ def main() -> None:
     report(run, [int(m) for m in args.marks.split(",")], config)
 
 
+def with_settings(config: TrainConfig, settings: list[str]) -> TrainConfig:
+    """``config`` with NAME=VALUE settings applied (``learner.`` and ``high.`` for the learners)."""
+    data = config.to_dict()
+    for setting in settings:
+        name, _, value = setting.partition("=")
+        *parents, leaf = name.split(".")
+        target = data
+        for parent in parents:
+            target = target[parent]
+        try:
+            target[leaf] = json.loads(value)
+        except json.JSONDecodeError:
+            target[leaf] = value
+    return TrainConfig.from_dict(data)
+
+
 def report(run: RunDir, marks: list[int], config: TrainConfig) -> None:
     """Print eval success and wall time at each mark (the first epoch at or past it)."""
     with open(run.metrics) as file:
@@ -55,7 +81,11 @@ def report(run: RunDir, marks: list[int], config: TrainConfig) -> None:
         f"# {config.algo.value} on {config.env}, seed {config.seed}, "
         f"{torch.get_num_threads()} torch thread(s), {platform.processor() or platform.machine()}"
     )
-    print(f"{'env_steps':>10} {'eval_success':>12} {'best_so_far':>11} {'wall_s':>8}")
+    subgoals = "eval_subgoal_reached" in rows[0]
+    print(
+        f"{'env_steps':>10} {'eval_success':>12} {'best_so_far':>11} {'wall_s':>8}"
+        + (f" {'subgoal_reached':>15}" if subgoals else "")
+    )
     for mark in marks:
         reached = [row for row in rows if row["env_steps"] >= mark]
         if not reached:
@@ -63,7 +93,10 @@ def report(run: RunDir, marks: list[int], config: TrainConfig) -> None:
             continue
         row = reached[0]
         best = max(r["eval_success"] for r in rows if r["env_steps"] <= row["env_steps"])
-        print(f"{int(row['env_steps']):>10} {row['eval_success']:>12.3f} {best:>11.3f} {row['wall_s']:>8.0f}")
+        print(
+            f"{int(row['env_steps']):>10} {row['eval_success']:>12.3f} {best:>11.3f} {row['wall_s']:>8.0f}"
+            + (f" {row['eval_subgoal_reached']:>15.3f}" if subgoals else "")
+        )
 
 
 def _horizon(env_id: str) -> int:

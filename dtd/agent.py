@@ -41,6 +41,10 @@ class Agent(Protocol):
         """Run ``updates`` gradient steps (then move the targets) and return mean diagnostics."""
         ...
 
+    def episode_metrics(self, episodes: Episodes) -> dict[str, float]:
+        """Figures of collected episodes that only this kind of agent has (may be empty)."""
+        ...
+
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
         """Plain data of everything the agent learned (and, optionally, its replay)."""
         ...
@@ -106,6 +110,9 @@ class GoalConditionedAgent:
                 totals[name] = totals.get(name, 0.0) + value
         self.learner.update_target()
         return {name: value / updates for name, value in totals.items()} if updates else {}
+
+    def episode_metrics(self, episodes: Episodes) -> dict[str, float]:
+        return {}
 
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
         state: dict[str, Any] = {"learner": self.learner.state_dict()}

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+from typing import Annotated
 
 import tyro
 
@@ -13,7 +14,7 @@ from dtd.errors import DtdError
 
 
 def train(
-    config: tyro.conf.OmitArgPrefixes[TrainConfig],
+    config: Annotated[TrainConfig, tyro.conf.arg(name="")],
     run_dir: Path | None = None,
     resume: Path | None = None,
     force: bool = False,
@@ -54,6 +55,7 @@ def evaluate(
     episodes: int = 100,
     checkpoint: str = "latest",
     seed: int = 1_000_003,
+    show_subgoals: bool = False,
 ) -> None:
     """Evaluate a trained run with deterministic actions; print one JSON line of figures.
 
@@ -62,10 +64,30 @@ def evaluate(
         episodes: Number of evaluation episodes.
         checkpoint: latest, best, or a path to a checkpoint file of this run.
         seed: Seed of the evaluation episodes (apart from training's).
+        show_subgoals: dtd runs: first print each episode's plan (start, sub-goals, reached, goal).
     """
     from dtd.runs import evaluate_run
 
-    print(json.dumps(evaluate_run(run_dir, episodes, checkpoint, seed)))
+    result = evaluate_run(run_dir, episodes, checkpoint, seed, show_subgoals)
+    for number, plan in enumerate(result.pop("plans", []), start=1):
+        print(format_plan(number, plan))
+    print(json.dumps(result))
+
+
+def format_plan(number: int, plan: dict) -> str:
+    """One episode's plan as readable lines."""
+
+    def point(values: list[float]) -> str:
+        return "(" + ", ".join(f"{v:.3f}" for v in values) + ")"
+
+    lines = [
+        f"episode {number}: {'success' if plan['success'] else 'failure'}",
+        f"  start    {point(plan['start'])}",
+    ]
+    for segment, (subgoal, reached) in enumerate(zip(plan["subgoals"], plan["reached"], strict=True)):
+        lines.append(f"  segment {segment}: sub-goal {point(subgoal)}  reached {point(reached)}")
+    lines.append(f"  goal     {point(plan['goal'])}")
+    return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -74,7 +96,7 @@ def main(argv: list[str] | None = None) -> None:
         tyro.extras.subcommand_cli_from_dict(
             {"train": train, "eval": evaluate},
             prog="dtd",
-            description="Dot-to-Dot: train and explain goal-conditioned agents (DDPG, HER).",
+            description="Dot-to-Dot: train and explain goal-conditioned agents (DDPG, HER, DtD).",
             args=argv,
         )
     except DtdError as exc:

@@ -12,6 +12,8 @@ import enum
 import math
 from typing import Any
 
+import tyro
+
 from dtd.errors import ConfigError
 
 
@@ -22,6 +24,17 @@ class Algo(enum.Enum):
     """Goal-conditioned DDPG, no relabelling."""
     her = "her"
     """DDPG with Hindsight Experience Replay (``future`` strategy)."""
+    dtd = "dtd"
+    """Dot-to-Dot: a high-level sub-goal policy over a low-level HER agent, HER at both levels."""
+
+
+class RelabelWindow(enum.Enum):
+    """How far ahead the low level of Dot-to-Dot draws its relabelled goals from."""
+
+    segment = "segment"
+    """Only from the segment of the transition: near goals, like the sub-goals it is given."""
+    episode = "episode"
+    """From anywhere later in the episode, as in plain HER."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,6 +63,10 @@ class LearnerConfig:
     """Raw observations and goals are clipped to [-obs_clip, obs_clip] before normalising."""
     norm_eps: float = 0.01
     """Smallest standard deviation the running normalisers divide by."""
+
+
+HIGH_LEVEL_DEFAULTS = LearnerConfig(action_l2=0.0)
+"""The high level's learner: as the low level's, but no penalty on sub-goals far from the start."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,8 +99,32 @@ class TrainConfig:
     """Exploration: probability of taking a uniformly random action instead."""
     threads: int = 1
     """Torch threads for the learner; 1 makes runs reproducible bit for bit."""
-    learner: LearnerConfig = LearnerConfig()
-    """Settings of the DDPG learner."""
+    learner: tyro.conf.OmitArgPrefixes[LearnerConfig] = LearnerConfig()
+    """Settings of the DDPG learner (of the low level, for dtd)."""
+    segments: int = 2
+    """dtd: segments an episode is cut into; one sub-goal each, the last one being the goal."""
+    subgoal_sigma: float = 0.05
+    """dtd: std of the Gaussian perturbation of the achieved goal proposed as a sub-goal."""
+    subgoal_eps_start: float = 1.0
+    """dtd: probability of a perturbation sub-goal (instead of the high level's) at the start."""
+    subgoal_eps_floor: float = 0.1
+    """dtd: the probability of a perturbation sub-goal after the decay."""
+    subgoal_eps_decay_epochs: float = 10.0
+    """dtd: epochs over which that probability falls linearly from start to floor."""
+    subgoal_noise: float = 0.05
+    """dtd: std of the Gaussian exploration noise added to the high level's sub-goals."""
+    subgoal_max_distance: float = 0.3
+    """dtd: the high level proposes sub-goals within this distance (per coordinate) of the
+    achieved goal, clipped to the goal box."""
+    high_replay_k: int = 4
+    """dtd: HER at the high level: goals replaced by later achieved goals in k/(k+1) of samples."""
+    hindsight_action_prob: float = 0.0
+    """dtd: probability that a sampled high-level transition has its sub-goal replaced by the
+    goal actually reached at the segment's end (hindsight action relabelling)."""
+    low_relabel_window: RelabelWindow = RelabelWindow.segment
+    """dtd: where the low level's relabelled goals come from."""
+    high: LearnerConfig = HIGH_LEVEL_DEFAULTS
+    """dtd: settings of the high level's DDPG learner (gamma None: gamma_low ** (T / segments))."""
 
     def validate(self) -> None:
         """Raise :class:`ConfigError` naming the first setting that cannot work."""
@@ -112,29 +153,35 @@ class TrainConfig:
             ),
             (self.threads >= 1, f"--threads must be at least 1, got {self.threads}"),
             (self.seed >= 0, f"--seed must be 0 or more, got {self.seed}"),
+            (self.segments >= 2, f"--segments must be at least 2, got {self.segments}"),
+            (
+                _finite_in(self.subgoal_sigma, 0, math.inf),
+                f"--subgoal-sigma must be >= 0, got {self.subgoal_sigma}",
+            ),
+            (
+                _finite_in(self.subgoal_eps_start, 0, 1) and _finite_in(self.subgoal_eps_floor, 0, 1),
+                "--subgoal-eps-start and --subgoal-eps-floor must lie in [0, 1]",
+            ),
+            (
+                _finite_in(self.subgoal_eps_decay_epochs, 0, math.inf),
+                f"--subgoal-eps-decay-epochs must be >= 0, got {self.subgoal_eps_decay_epochs}",
+            ),
+            (
+                _finite_in(self.subgoal_noise, 0, math.inf),
+                f"--subgoal-noise must be >= 0, got {self.subgoal_noise}",
+            ),
+            (
+                _positive(self.subgoal_max_distance),
+                f"--subgoal-max-distance must be > 0, got {self.subgoal_max_distance}",
+            ),
+            (self.high_replay_k >= 0, f"--high-replay-k must be 0 or more, got {self.high_replay_k}"),
+            (
+                _finite_in(self.hindsight_action_prob, 0, 1),
+                f"--hindsight-action-prob must lie in [0, 1], got {self.hindsight_action_prob}",
+            ),
         ]
-        learner = self.learner
-        checks += [
-            (
-                len(learner.hidden_sizes) >= 1 and all(h >= 1 for h in learner.hidden_sizes),
-                f"--hidden-sizes must be positive widths, got {learner.hidden_sizes}",
-            ),
-            (_positive(learner.actor_lr), f"--actor-lr must be > 0, got {learner.actor_lr}"),
-            (_positive(learner.critic_lr), f"--critic-lr must be > 0, got {learner.critic_lr}"),
-            (learner.batch_size >= 1, f"--batch-size must be at least 1, got {learner.batch_size}"),
-            (_finite_in(learner.polyak, 0, 1), f"--polyak must lie in [0, 1], got {learner.polyak}"),
-            (
-                _finite_in(learner.action_l2, 0, math.inf),
-                f"--action-l2 must be >= 0, got {learner.action_l2}",
-            ),
-            (
-                learner.gamma is None or (_finite_in(learner.gamma, 0, 1) and learner.gamma > 0),
-                f"--gamma must lie in (0, 1], got {learner.gamma}",
-            ),
-            (_positive(learner.norm_clip), f"--norm-clip must be > 0, got {learner.norm_clip}"),
-            (_positive(learner.obs_clip), f"--obs-clip must be > 0, got {learner.obs_clip}"),
-            (_positive(learner.norm_eps), f"--norm-eps must be > 0, got {learner.norm_eps}"),
-        ]
+        checks += _learner_checks(self.learner, "--")
+        checks += _learner_checks(self.high, "--high.")
         for ok, message in checks:
             if not ok:
                 raise ConfigError(message)
@@ -147,23 +194,59 @@ class TrainConfig:
     def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
         """Inverse of :meth:`to_dict`; unknown keys are an error, missing keys take defaults."""
         data = dict(data)
-        learner_data = dict(data.pop("learner", {}))
-        _reject_unknown(LearnerConfig, learner_data)
         _reject_unknown(cls, data)
-        if "hidden_sizes" in learner_data:
-            learner_data["hidden_sizes"] = tuple(learner_data["hidden_sizes"])
-        if "algo" in data:
-            try:
-                data["algo"] = Algo(data["algo"])
-            except ValueError as exc:
-                raise ConfigError(f"unknown algo {data['algo']!r}") from exc
-        return cls(**data, learner=LearnerConfig(**learner_data))
+        learners = {
+            name: _learner_from_dict(data.pop(name), default)
+            for name, default in (("learner", LearnerConfig()), ("high", HIGH_LEVEL_DEFAULTS))
+            if name in data
+        }
+        for name, kind in (("algo", Algo), ("low_relabel_window", RelabelWindow)):
+            if name in data:
+                try:
+                    data[name] = kind(data[name])
+                except ValueError as exc:
+                    raise ConfigError(f"unknown {name} {data[name]!r}") from exc
+        return cls(**data, **learners)
+
+
+def _learner_from_dict(data: dict[str, Any], default: LearnerConfig) -> LearnerConfig:
+    data = dict(data)
+    _reject_unknown(LearnerConfig, data)
+    if "hidden_sizes" in data:
+        data["hidden_sizes"] = tuple(data["hidden_sizes"])
+    return dataclasses.replace(default, **data)
+
+
+def _learner_checks(learner: LearnerConfig, prefix: str) -> list[tuple[bool, str]]:
+    return [
+        (
+            len(learner.hidden_sizes) >= 1 and all(h >= 1 for h in learner.hidden_sizes),
+            f"{prefix}hidden-sizes must be positive widths, got {learner.hidden_sizes}",
+        ),
+        (_positive(learner.actor_lr), f"{prefix}actor-lr must be > 0, got {learner.actor_lr}"),
+        (_positive(learner.critic_lr), f"{prefix}critic-lr must be > 0, got {learner.critic_lr}"),
+        (learner.batch_size >= 1, f"{prefix}batch-size must be at least 1, got {learner.batch_size}"),
+        (_finite_in(learner.polyak, 0, 1), f"{prefix}polyak must lie in [0, 1], got {learner.polyak}"),
+        (
+            _finite_in(learner.action_l2, 0, math.inf),
+            f"{prefix}action-l2 must be >= 0, got {learner.action_l2}",
+        ),
+        (
+            learner.gamma is None or (_finite_in(learner.gamma, 0, 1) and learner.gamma > 0),
+            f"{prefix}gamma must lie in (0, 1], got {learner.gamma}",
+        ),
+        (_positive(learner.norm_clip), f"{prefix}norm-clip must be > 0, got {learner.norm_clip}"),
+        (_positive(learner.obs_clip), f"{prefix}obs-clip must be > 0, got {learner.obs_clip}"),
+        (_positive(learner.norm_eps), f"{prefix}norm-eps must be > 0, got {learner.norm_eps}"),
+    ]
 
 
 def flat_items(config: TrainConfig) -> dict[str, Any]:
-    """Settings as one flat mapping of option names (``learner.`` prefix dropped) to values."""
+    """Settings keyed by their option names without dashes: the low level's learner settings
+    unprefixed, the high level's as ``high.<name>``."""
     flat = config.to_dict()
     flat.update(flat.pop("learner"))
+    flat.update({f"high.{name}": value for name, value in flat.pop("high").items()})
     return flat
 
 

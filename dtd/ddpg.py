@@ -10,7 +10,7 @@ import torch
 from torch import nn
 
 from dtd.config import LearnerConfig
-from dtd.networks import Actor, Critic
+from dtd.networks import ActionHead, Actor, Critic
 from dtd.normalizer import RunningNormalizer
 from dtd.records import Batch
 
@@ -18,8 +18,9 @@ from dtd.records import Batch
 class DDPGLearner:
     """Actor mu(o, g), critic Q(o, g, a), their Polyak targets and the input normalisers.
 
-    Learns from batches it is given; acting with exploration, collecting and relabelling
-    are the caller's concern.
+    The ``head`` decides what an action is: a motor command (the low level) or a sub-goal
+    (the high level). Learns from batches it is given; acting with exploration, collecting
+    and relabelling are the caller's concern.
     """
 
     def __init__(
@@ -27,7 +28,7 @@ class DDPGLearner:
         obs_dim: int,
         goal_dim: int,
         action_dim: int,
-        action_max: float,
+        head: ActionHead,
         config: LearnerConfig,
         gamma: float,
     ) -> None:
@@ -38,8 +39,9 @@ class DDPGLearner:
         self.obs_norm = RunningNormalizer(obs_dim, config.norm_eps, config.norm_clip)
         self.goal_norm = RunningNormalizer(goal_dim, config.norm_eps, config.norm_clip)
         input_dim = obs_dim + goal_dim
-        self.actor = Actor(input_dim, action_dim, config.hidden_sizes, action_max)
-        self.critic = Critic(input_dim, action_dim, config.hidden_sizes, action_max)
+        self.head = head
+        self.actor = Actor(input_dim, action_dim, config.hidden_sizes)
+        self.critic = Critic(input_dim, action_dim, config.hidden_sizes)
         self.actor_target = _frozen_copy(self.actor)
         self.critic_target = _frozen_copy(self.critic)
         self.actor_optim = torch.optim.Adam(self.actor.parameters(), lr=config.actor_lr)
@@ -52,15 +54,27 @@ class DDPGLearner:
         goal_t = torch.clamp(torch.as_tensor(goal, dtype=torch.float32), -clip, clip)
         return torch.cat([self.obs_norm.normalize(obs_t), self.goal_norm.normalize(goal_t)], dim=-1)
 
+    def _policy(
+        self, actor: nn.Module, inputs: torch.Tensor, obs: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        unit = actor(inputs)
+        return self.head(unit, obs), unit
+
+    def _q(self, critic: nn.Module, inputs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        return critic(inputs, self.head.critic_features(action, self.goal_norm))
+
     @torch.no_grad()
     def act(self, obs: np.ndarray, goal: np.ndarray) -> np.ndarray:
         """Deterministic actions mu(o, g) for a batch."""
-        return self.actor(self.inputs(obs, goal)).numpy()
+        obs_t = torch.as_tensor(obs, dtype=torch.float32)
+        return self._policy(self.actor, self.inputs(obs_t, goal), obs_t)[0].numpy()
 
     @torch.no_grad()
     def q_values(self, obs: np.ndarray, goal: np.ndarray, action: np.ndarray) -> np.ndarray:
         """Q(o, g, a) for a batch."""
-        return self.critic(self.inputs(obs, goal), torch.as_tensor(action, dtype=torch.float32)).numpy()
+        return self._q(
+            self.critic, self.inputs(obs, goal), torch.as_tensor(action, dtype=torch.float32)
+        ).numpy()
 
     def update_normalizers(self, obs: np.ndarray, goal: np.ndarray) -> None:
         """Add observations and goals to the running statistics of the inputs."""
@@ -70,24 +84,34 @@ class DDPGLearner:
 
     def update(self, batch: Batch) -> dict[str, float]:
         """One gradient step of critic then actor; returns diagnostics."""
-        inputs = self.inputs(batch.obs, batch.goal)
-        next_inputs = self.inputs(batch.next_obs, batch.goal)
+        obs = torch.as_tensor(batch.obs, dtype=torch.float32)
+        next_obs = torch.as_tensor(batch.next_obs, dtype=torch.float32)
+        inputs = self.inputs(obs, batch.goal)
+        next_inputs = self.inputs(next_obs, batch.goal)
         action = torch.as_tensor(batch.action, dtype=torch.float32)
         reward = torch.as_tensor(batch.reward, dtype=torch.float32)
 
         with torch.no_grad():
-            next_q = self.critic_target(next_inputs, self.actor_target(next_inputs))
+            next_action = self._policy(self.actor_target, next_inputs, next_obs)[0]
+            if batch.next_action is not None and batch.next_action_given is not None:
+                given = torch.as_tensor(batch.next_action_given)[:, None]
+                next_action = torch.where(
+                    given, torch.as_tensor(batch.next_action, dtype=torch.float32), next_action
+                )
+            next_q = self._q(self.critic_target, next_inputs, next_action)
             # Episodes end only by the time limit, so every transition bootstraps.
             target = torch.clamp(reward + self.gamma * next_q, *self.return_bounds)
-        q = self.critic(inputs, action)
+        q = self._q(self.critic, inputs, action)
         critic_loss = torch.mean(torch.square(q - target))
         self.critic_optim.zero_grad(set_to_none=True)
         critic_loss.backward()
         self.critic_optim.step()
 
-        policy_action = self.actor(inputs)
-        action_penalty = torch.mean(torch.square(policy_action / self.actor.action_max))
-        actor_loss = -self.critic(inputs, policy_action).mean() + self.config.action_l2 * action_penalty
+        policy_action, unit = self._policy(self.actor, inputs, obs)
+        action_penalty = torch.mean(torch.square(unit))
+        actor_loss = (
+            -self._q(self.critic, inputs, policy_action).mean() + self.config.action_l2 * action_penalty
+        )
         self.actor_optim.zero_grad(set_to_none=True)
         actor_loss.backward()
         self.actor_optim.step()
@@ -110,6 +134,7 @@ class DDPGLearner:
     def state_dict(self) -> dict[str, Any]:
         """Plain data: network, optimiser and normaliser states."""
         return {
+            "head": self.head.state_dict(),
             "actor": self.actor.state_dict(),
             "critic": self.critic.state_dict(),
             "actor_target": self.actor_target.state_dict(),
@@ -122,6 +147,7 @@ class DDPGLearner:
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore what :meth:`state_dict` returned."""
+        self.head.load_state_dict(state["head"])
         self.actor.load_state_dict(state["actor"])
         self.critic.load_state_dict(state["critic"])
         self.actor_target.load_state_dict(state["actor_target"])

@@ -30,6 +30,12 @@ class EnvSpec:
     """Actions lie in [-action_max, action_max] in every dimension."""
     horizon: int
     """Steps per episode (the environment's time limit), T."""
+    goal_low: tuple[float, ...]
+    """Lower corner of the box goals (and so sub-goals) are kept in."""
+    goal_high: tuple[float, ...]
+    """Upper corner of that box."""
+    quaternion: tuple[int, int] | None = None
+    """Goal entries [start, stop) that hold a unit quaternion (a rotation), if any."""
 
     def default_gamma(self) -> float:
         """The reference discount 1 - 1/T."""
@@ -92,16 +98,52 @@ def env_spec(env: gym.Env, env_id: str) -> EnvSpec:
     horizon = env.spec.max_episode_steps if env.spec is not None else None
     if not horizon:
         raise EnvError(f"environment {env_id!r} has no time limit (max_episode_steps)")
+    goal_dim = int(np.prod(space["desired_goal"].shape))
+    quaternion = _quaternion_part(env, goal_dim)
+    goal_low, goal_high = goal_bounds(env, quaternion)
     spec = EnvSpec(
         env_id=env_id,
         obs_dim=int(np.prod(space["observation"].shape)),
-        goal_dim=int(np.prod(space["desired_goal"].shape)),
+        goal_dim=goal_dim,
         action_dim=int(np.prod(action_space.shape)),
         action_max=float(high.flat[0]),
         horizon=int(horizon),
+        goal_low=tuple(goal_low.tolist()),
+        goal_high=tuple(goal_high.tolist()),
+        quaternion=quaternion,
     )
     _check_batched_reward(env, spec)
     return spec
+
+
+def _quaternion_part(env: gym.Env, goal_dim: int) -> tuple[int, int] | None:
+    # The in-hand manipulation tasks' goals are a position then a rotation quaternion.
+    if goal_dim == 7 and hasattr(env.unwrapped, "target_rotation"):
+        return (3, 7)
+    return None
+
+
+def goal_bounds(
+    env: gym.Env, quaternion: tuple[int, int] | None, resets: int = 50
+) -> tuple[np.ndarray, np.ndarray]:
+    """A box holding the task's goals: the goal space's own bounds where finite, else the
+    range of goals and achieved goals over ``resets`` seeded resets, widened by a margin."""
+    space = env.observation_space["desired_goal"]
+    low = np.asarray(space.low, dtype=np.float64).ravel().copy()
+    high = np.asarray(space.high, dtype=np.float64).ravel().copy()
+    if not (np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
+        seen = []
+        for seed in range(resets):
+            first, _ = env.reset(seed=seed)
+            seen += [first["desired_goal"].ravel(), first["achieved_goal"].ravel()]
+        seen_low, seen_high = np.min(seen, axis=0), np.max(seen, axis=0)
+        margin = np.maximum(0.1 * (seen_high - seen_low), 0.05)
+        low = np.where(np.isfinite(low), low, seen_low - margin)
+        high = np.where(np.isfinite(high), high, seen_high + margin)
+    if quaternion is not None:
+        low[quaternion[0] : quaternion[1]] = -1.0
+        high[quaternion[0] : quaternion[1]] = 1.0
+    return low, high
 
 
 def _check_batched_reward(env: gym.Env, spec: EnvSpec) -> None:

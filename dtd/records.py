@@ -42,3 +42,7 @@ class Batch(NamedTuple):
     reward: np.ndarray
     """(N,) reward of reaching ``goal`` on the step to ``next_obs``."""
     next_obs: np.ndarray
+    next_action: np.ndarray | None = None
+    """Where given (rows of ``next_action_given``), the action that follows ``next_obs`` is
+    known and is used for bootstrapping instead of the target actor's."""
+    next_action_given: np.ndarray | None = None

@@ -44,20 +44,29 @@ def run_episodes(
     return Episodes(obs, achieved, actions, step_goals, desired, success)
 
 
-def evaluate(
-    envs: Sequence[gym.Env], agent: Agent, spec: EnvSpec, episodes: int, rng: np.random.Generator
-) -> dict[str, float]:
-    """Deterministic episodes; success is the task's ``is_success`` at the last step."""
-    successes: list[np.ndarray] = []
-    distances: list[np.ndarray] = []
-    remaining = episodes
+def run_many(
+    envs: Sequence[gym.Env], agent: Agent, spec: EnvSpec, count: int, explore: bool, rng: np.random.Generator
+) -> Episodes:
+    """``count`` episodes, in batches of at most one per environment."""
+    batches = []
+    remaining = count
     while remaining > 0:
         used = envs[: min(remaining, len(envs))]
-        batch = run_episodes(used, agent, spec, explore=False, rng=rng)
-        successes.append(batch.success)
-        distances.append(batch.final_distance())
+        batches.append(run_episodes(used, agent, spec, explore, rng))
         remaining -= len(used)
+    return concatenate(batches)
+
+
+def concatenate(batches: Sequence[Episodes]) -> Episodes:
+    """One batch of episodes from several."""
+    return Episodes(*(np.concatenate(parts) for parts in zip(*batches, strict=True)))
+
+
+def episode_figures(agent: Agent, episodes: Episodes) -> dict[str, float]:
+    """Success (the task's ``is_success`` at the last step), final distance to the goal, and
+    the agent's own figures of these episodes."""
     return {
-        "success": float(np.mean(np.concatenate(successes), dtype=np.float64)),
-        "final_distance": float(np.mean(np.concatenate(distances), dtype=np.float64)),
+        "success": float(np.mean(episodes.success, dtype=np.float64)),
+        "final_distance": float(np.mean(episodes.final_distance(), dtype=np.float64)),
+        **agent.episode_metrics(episodes),
     }

@@ -13,16 +13,19 @@ import torch
 from dtd.agent import Agent, GoalConditionedAgent
 from dtd.buffer import EpisodeBuffer
 from dtd.checkpoint import load_checkpoint
-from dtd.config import Algo, TrainConfig, flat_items
+from dtd.config import Algo, RelabelWindow, TrainConfig, flat_items
 from dtd.ddpg import DDPGLearner
 from dtd.envs import EnvSpec, make_envs, reward_function
 from dtd.errors import CheckpointError, ConfigError, RunDirError
 from dtd.exploration import ActionNoise
-from dtd.her import GoalStrategy
+from dtd.her import GoalStrategy, relabel_probability
+from dtd.hierarchy import DotToDotAgent, HandOverSchedule, SubgoalExploration
+from dtd.networks import BoxActionHead, SubgoalHead
 from dtd.progress import TrainingProgress
 from dtd.recorder import MetricsRecorder
-from dtd.rollout import evaluate
+from dtd.rollout import episode_figures, run_many
 from dtd.run_dir import RunDir, read_config, write_config
+from dtd.segments import segment_bounds, segment_window_end
 from dtd.trainer import Trainer, TrainState
 
 # Settings that may change when a run is resumed; any other must stay as the run began.
@@ -44,15 +47,49 @@ class Components:
 def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env) -> Agent:
     """The agent ``config.algo`` names, with fresh networks and an empty replay."""
     gamma = config.learner.gamma if config.learner.gamma is not None else spec.default_gamma()
-    learner = DDPGLearner(
-        spec.obs_dim, spec.goal_dim, spec.action_dim, spec.action_max, config.learner, gamma
+    low = DDPGLearner(
+        spec.obs_dim, spec.goal_dim, spec.action_dim, BoxActionHead(spec.action_max), config.learner, gamma
     )
     buffer = EpisodeBuffer.for_transitions(
         config.buffer_size, spec.horizon, spec.obs_dim, spec.goal_dim, spec.action_dim
     )
     noise = ActionNoise(config.noise_eps, config.random_eps, spec.action_max)
-    strategy = GoalStrategy.future if config.algo is Algo.her else GoalStrategy.none
-    return GoalConditionedAgent(learner, buffer, reward_function(env), noise, strategy, config.replay_k)
+    reward_fn = reward_function(env)
+    if config.algo is not Algo.dtd:
+        strategy = GoalStrategy.future if config.algo is Algo.her else GoalStrategy.none
+        return GoalConditionedAgent(low, buffer, reward_fn, noise, strategy, config.replay_k)
+
+    if config.segments > spec.horizon:
+        raise ConfigError(f"--segments must be at most the horizon ({spec.horizon}), got {config.segments}")
+    bounds = segment_bounds(spec.horizon, config.segments)
+    # By default the high level discounts a segment as the low level discounts its steps.
+    high_gamma = (
+        config.high.gamma if config.high.gamma is not None else gamma ** (spec.horizon / config.segments)
+    )
+    head = SubgoalHead(config.subgoal_max_distance, spec.goal_low, spec.goal_high, spec.quaternion)
+    high = DDPGLearner(
+        spec.obs_dim + spec.goal_dim, spec.goal_dim, spec.goal_dim, head, config.high, high_gamma
+    )
+    schedule = HandOverSchedule(
+        config.subgoal_eps_start,
+        config.subgoal_eps_floor,
+        config.subgoal_eps_decay_epochs,
+        config.n_cycles * config.episodes_per_cycle,
+    )
+    window = segment_window_end(bounds) if config.low_relabel_window is RelabelWindow.segment else None
+    return DotToDotAgent(
+        low=low,
+        high=high,
+        buffer=buffer,
+        reward_fn=reward_fn,
+        bounds=bounds,
+        action_noise=noise,
+        exploration=SubgoalExploration(schedule, config.subgoal_sigma, config.subgoal_noise),
+        low_relabel_prob=relabel_probability(GoalStrategy.future, config.replay_k),
+        low_window_end=window,
+        high_relabel_prob=relabel_probability(GoalStrategy.future, config.high_replay_k),
+        hindsight_action_prob=config.hindsight_action_prob,
+    )
 
 
 def build(config: TrainConfig, eval_seed: int | None = None, eval_envs: int | None = None) -> Components:
@@ -94,7 +131,9 @@ def check_checkpoint(snapshot: dict[str, Any], config: TrainConfig, spec: EnvSpe
             f"checkpoint {path} belongs to a {snapshot.get('algo')} run on {snapshot.get('env_id')}, "
             f"not to this {config.algo.value} run on {config.env}"
         )
-    if snapshot.get("spec") != dataclasses.asdict(spec):
+    dims = ("obs_dim", "goal_dim", "action_dim", "horizon")
+    stored = snapshot.get("spec") or {}
+    if any(stored.get(name) != getattr(spec, name) for name in dims):
         raise CheckpointError(f"checkpoint {path} was written for an environment of other dimensions")
 
 
@@ -176,12 +215,17 @@ def train(
         close_all(components)
 
 
-def evaluate_run(run_dir: Path, episodes: int, checkpoint: str, seed: int) -> dict[str, Any]:
-    """Deterministic episodes of a trained agent; the figures as a dict."""
+def evaluate_run(
+    run_dir: Path, episodes: int, checkpoint: str, seed: int, show_subgoals: bool = False
+) -> dict[str, Any]:
+    """Deterministic episodes of a trained agent; the figures as a dict (with ``plans``, the
+    high level's sub-goals per episode, when ``show_subgoals``)."""
     if episodes < 1:
         raise ConfigError(f"--episodes must be at least 1, got {episodes}")
     run = RunDir(run_dir)
     config = read_config(run)
+    if show_subgoals and config.algo is not Algo.dtd:
+        raise ConfigError(f"--show-subgoals needs a dtd run; {run.root} is a {config.algo.value} run")
     path = run.checkpoint(checkpoint)
     snapshot = load_checkpoint(path)
     components = build(config, eval_seed=seed, eval_envs=min(episodes, 10))
@@ -189,10 +233,18 @@ def evaluate_run(run_dir: Path, episodes: int, checkpoint: str, seed: int) -> di
     agent_state = {k: v for k, v in snapshot["agent"].items() if k != "buffer"}
     components.agent.load_state_dict(agent_state)
     try:
-        result = evaluate(components.eval_envs, components.agent, components.spec, episodes, components.rng)
+        played = run_many(
+            components.eval_envs,
+            components.agent,
+            components.spec,
+            episodes,
+            explore=False,
+            rng=components.rng,
+        )
     finally:
         close_all(components)
-    return {
+    figures = episode_figures(components.agent, played)
+    result: dict[str, Any] = {
         "run_dir": str(run.root),
         "checkpoint": str(path),
         "env": config.env,
@@ -201,9 +253,14 @@ def evaluate_run(run_dir: Path, episodes: int, checkpoint: str, seed: int) -> di
         "env_steps": snapshot["state"]["env_steps"],
         "episodes": episodes,
         "seed": seed,
-        "success_rate": result["success"],
-        "mean_final_distance": result["final_distance"],
+        "success_rate": figures.pop("success"),
+        "mean_final_distance": figures.pop("final_distance"),
+        **figures,
     }
+    if show_subgoals:
+        assert isinstance(components.agent, DotToDotAgent)
+        result["plans"] = components.agent.plan(played)
+    return result
 
 
 def close_all(components: Components) -> None:

@@ -20,7 +20,7 @@ from dtd.config import TrainConfig
 from dtd.envs import EnvSpec
 from dtd.progress import TrainingProgress
 from dtd.recorder import MetricsRecorder, Row
-from dtd.rollout import evaluate, run_episodes
+from dtd.rollout import concatenate, episode_figures, run_episodes, run_many
 from dtd.run_dir import RunDir
 
 
@@ -80,22 +80,21 @@ class Trainer:
         for epoch in range(state.epoch + 1, config.epochs + 1):
             start = time.perf_counter()
             sums: dict[str, float] = {}
-            successes: list[np.ndarray] = []
-            distances: list[np.ndarray] = []
-            for _ in range(config.n_cycles):
+            collected = []
+            for cycle in range(1, config.n_cycles + 1):
                 episodes = run_episodes(self.train_envs, self.agent, self.spec, explore=True, rng=self.rng)
                 self.agent.store(episodes, self.rng)
                 for name, value in self.agent.train(config.updates_per_cycle, self.rng).items():
                     sums[name] = sums.get(name, 0.0) + value
-                successes.append(episodes.success)
-                distances.append(episodes.final_distance())
+                collected.append(episodes)
                 steps = episodes.count * self.spec.horizon
                 state.env_steps += steps
                 state.episodes += episodes.count
                 state.updates += config.updates_per_cycle
-                rate = steps * len(successes) / (time.perf_counter() - start)
-                self.progress.advance(steps, epoch, rate)
-            evaluation = evaluate(self.eval_envs, self.agent, self.spec, config.test_episodes, self.rng)
+                self.progress.advance(steps, epoch, steps * cycle / (time.perf_counter() - start))
+            evaluation = run_many(
+                self.eval_envs, self.agent, self.spec, config.test_episodes, explore=False, rng=self.rng
+            )
             state.wall_s += time.perf_counter() - start
             state.epoch = epoch
             row: Row = {
@@ -104,10 +103,8 @@ class Trainer:
                 "updates": state.updates,
                 "episodes": state.episodes,
                 "wall_s": round(state.wall_s, 3),
-                "eval_success": evaluation["success"],
-                "train_success": float(np.mean(np.concatenate(successes), dtype=np.float64)),
-                "eval_final_distance": evaluation["final_distance"],
-                "train_final_distance": float(np.mean(np.concatenate(distances), dtype=np.float64)),
+                **_prefixed("eval_", episode_figures(self.agent, evaluation)),
+                **_prefixed("train_", episode_figures(self.agent, concatenate(collected))),
                 **{name: total / config.n_cycles for name, total in sums.items()},
             }
             state.history.append(row)
@@ -148,3 +145,7 @@ class Trainer:
         restore_env_rng_states(self.train_envs, snapshot["rng"]["train_envs"])
         restore_env_rng_states(self.eval_envs, snapshot["rng"]["eval_envs"])
         return TrainState(**snapshot["state"])
+
+
+def _prefixed(prefix: str, figures: dict[str, float]) -> dict[str, float]:
+    return {prefix + name: value for name, value in figures.items()}

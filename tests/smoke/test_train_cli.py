@@ -93,21 +93,25 @@ def test_help_documents_every_setting_with_its_default():
 
 
 @pytest.mark.parametrize(
-    ("env_id", "obs_dim"),
+    ("env_id", "obs_dim", "algo"),
     [
-        ("FetchPush-v4", 25),
-        ("FetchPickAndPlace-v4", 25),
-        ("FetchSlide-v4", 25),
-        ("HandManipulateBlock-v1", 61),
-        ("gymnasium_robotics:FetchReach-v4", 10),
+        ("FetchPush-v4", 25, "her"),
+        ("FetchPickAndPlace-v4", 25, "her"),
+        ("FetchSlide-v4", 25, "her"),
+        ("HandManipulateBlock-v1", 61, "her"),
+        ("gymnasium_robotics:FetchReach-v4", 10, "ddpg"),
+        ("FetchReach-v4", 10, "dtd"),
+        ("FetchPush-v4", 25, "dtd"),
+        ("FetchPickAndPlace-v4", 25, "dtd"),
+        ("HandManipulateBlock-v1", 61, "dtd"),
     ],
 )
-def test_every_task_of_the_paper_trains(tmp_path, env_id, obs_dim):
+def test_every_task_of_the_paper_trains(tmp_path, env_id, obs_dim, algo):
     run_dir = tmp_path / "run"
     args = ["--n-cycles", "1", "--updates-per-cycle", "2", "--batch-size", "16", "--hidden-sizes", "16",
             "--test-episodes", "1", "--episodes-per-cycle", "1", "--buffer-size", "1000",
             "--no-progress"]  # fmt: skip
-    result = dtd("train", "--env", env_id, "--epochs", "1", *args, "--run-dir", run_dir)
+    result = dtd("train", "--env", env_id, "--algo", algo, "--epochs", "1", *args, "--run-dir", run_dir)
     assert result.returncode == 0, result.stderr
     assert json.loads((run_dir / "config.json").read_text())["derived"]["spec"]["obs_dim"] == obs_dim
     assert len(read_metrics(run_dir)) == 1

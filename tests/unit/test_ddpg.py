@@ -13,6 +13,7 @@ from dtd.config import LearnerConfig
 from dtd.ddpg import DDPGLearner
 from dtd.exploration import ActionNoise
 from dtd.her import GoalStrategy
+from dtd.networks import BoxActionHead
 from dtd.records import Batch, Episodes
 
 OBS, GOAL, ACT, T = 5, 3, 2, 6
@@ -21,7 +22,7 @@ SMALL = LearnerConfig(hidden_sizes=(32, 32), batch_size=16)
 
 def make_learner(config: LearnerConfig = SMALL, seed: int = 0) -> DDPGLearner:
     torch.manual_seed(seed)
-    return DDPGLearner(OBS, GOAL, ACT, action_max=2.0, config=config, gamma=0.9)
+    return DDPGLearner(OBS, GOAL, ACT, BoxActionHead(2.0), config=config, gamma=0.9)
 
 
 def random_batch(rng: np.random.Generator, size: int = 16) -> Batch:

@@ -1,0 +1,241 @@
+"""The Dot-to-Dot agent: a high level that places sub-goals ("dots") and a low level that
+reaches them, both the same DDPG learner, both trained with hindsight relabelling."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import torch
+
+from dtd.buffer import EpisodeBuffer
+from dtd.ddpg import DDPGLearner
+from dtd.envs import RewardFn
+from dtd.exploration import ActionNoise
+from dtd.her import sample_transitions
+from dtd.networks import SubgoalHead
+from dtd.records import Batch, Episodes
+from dtd.segments import sample_segment_transitions
+
+
+@dataclasses.dataclass(frozen=True)
+class HandOverSchedule:
+    """Probability of a perturbation sub-goal instead of the high level's: linear from
+    ``start`` to ``floor`` over ``decay_epochs`` epochs of episodes, then constant."""
+
+    start: float
+    floor: float
+    decay_epochs: float
+    episodes_per_epoch: int
+
+    def eps(self, episodes_seen: int) -> float:
+        """The probability after ``episodes_seen`` training episodes."""
+        if self.decay_epochs <= 0:
+            return self.floor
+        progress = min(1.0, episodes_seen / (self.decay_epochs * self.episodes_per_epoch))
+        return self.start + (self.floor - self.start) * progress
+
+
+@dataclasses.dataclass(frozen=True)
+class SubgoalExploration:
+    """How training episodes choose their sub-goals."""
+
+    schedule: HandOverSchedule
+    sigma: float
+    """Std of the perturbation of the achieved goal."""
+    noise: float
+    """Std of the noise on the high level's sub-goals."""
+
+
+class DotToDotAgent:
+    """Two levels over one episode buffer.
+
+    Each episode is cut at ``bounds``; at each segment's start the agent picks a sub-goal
+    (the task's goal for the last segment) and the low level pursues it for the whole
+    segment, reached or not. ``step_goal`` is that sub-goal at every step.
+    """
+
+    def __init__(
+        self,
+        low: DDPGLearner,
+        high: DDPGLearner,
+        buffer: EpisodeBuffer,
+        reward_fn: RewardFn,
+        bounds: np.ndarray,
+        action_noise: ActionNoise,
+        exploration: SubgoalExploration,
+        low_relabel_prob: float,
+        low_window_end: np.ndarray | None,
+        high_relabel_prob: float,
+        hindsight_action_prob: float,
+    ) -> None:
+        if not isinstance(high.head, SubgoalHead):
+            raise TypeError("the high level's learner must propose sub-goals (a SubgoalHead)")
+        self.low = low
+        self.high = high
+        self.buffer = buffer
+        self.reward_fn = reward_fn
+        self.bounds = bounds
+        self.segment_starts = {int(start): n for n, start in enumerate(bounds[:-1])}
+        self.action_noise = action_noise
+        self.exploration = exploration
+        self.low_relabel_prob = low_relabel_prob
+        self.low_window_end = low_window_end
+        self.high_relabel_prob = high_relabel_prob
+        self.hindsight_action_prob = hindsight_action_prob
+        self._subgoal: np.ndarray | None = None
+
+    @property
+    def segments(self) -> int:
+        return len(self.bounds) - 1
+
+    @property
+    def eps(self) -> float:
+        """The current probability of a perturbation sub-goal in training episodes."""
+        return self.exploration.schedule.eps(self.buffer.episodes_added)
+
+    def propose_subgoals(
+        self, obs: np.ndarray, achieved_goal: np.ndarray, desired_goal: np.ndarray
+    ) -> np.ndarray:
+        """The high level's deterministic sub-goals pi1(o || ag, g) for a batch."""
+        return self.high.act(np.concatenate([obs, achieved_goal], axis=-1), desired_goal)
+
+    def subgoal_values(
+        self, observation: Mapping[str, np.ndarray], goal: np.ndarray, candidates: np.ndarray
+    ) -> np.ndarray:
+        """Q1(o, g, sg) of the high level for each candidate sub-goal (absolute coordinates).
+
+        ``observation`` is the environment's dict observation (``observation`` and
+        ``achieved_goal`` are read), ``goal`` the task's goal, ``candidates`` (K, goal_dim).
+        Returns (K,) values.
+        """
+        candidates = np.asarray(candidates, dtype=np.float32).reshape(-1, self.high.goal_norm.size)
+        count = candidates.shape[0]
+        high_obs = np.concatenate(
+            [np.ravel(observation["observation"]), np.ravel(observation["achieved_goal"])]
+        ).astype(np.float32)
+        goals = np.ravel(goal).astype(np.float32)
+        return self.high.q_values(np.tile(high_obs, (count, 1)), np.tile(goals, (count, 1)), candidates)
+
+    def step_goal(
+        self,
+        obs: np.ndarray,
+        achieved_goal: np.ndarray,
+        desired_goal: np.ndarray,
+        t: int,
+        explore: bool,
+        rng: np.random.Generator,
+    ) -> np.ndarray:
+        segment = self.segment_starts.get(t)
+        if segment is None:
+            assert self._subgoal is not None, "episodes are stepped from t = 0"
+            return self._subgoal
+        if segment == self.segments - 1:
+            self._subgoal = desired_goal.copy()
+        elif not explore:
+            self._subgoal = self.propose_subgoals(obs, achieved_goal, desired_goal)
+        else:
+            self._subgoal = self._explore_subgoals(obs, achieved_goal, desired_goal, rng)
+        return self._subgoal
+
+    def _explore_subgoals(
+        self, obs: np.ndarray, achieved_goal: np.ndarray, desired_goal: np.ndarray, rng: np.random.Generator
+    ) -> np.ndarray:
+        count, goal_dim = desired_goal.shape
+        explore = self.exploration
+        perturbed = achieved_goal + explore.sigma * rng.standard_normal((count, goal_dim))
+        proposed = self.propose_subgoals(obs, achieved_goal, desired_goal)
+        proposed = proposed + explore.noise * rng.standard_normal((count, goal_dim))
+        take_perturbed = rng.random(count) < self.eps
+        chosen = np.where(take_perturbed[:, None], perturbed, proposed)
+        return self.high.head.project(torch.as_tensor(chosen, dtype=torch.float32)).numpy()
+
+    def act(self, obs: np.ndarray, goal: np.ndarray, explore: bool, rng: np.random.Generator) -> np.ndarray:
+        action = self.low.act(obs, goal)
+        return self.action_noise(action, rng) if explore else action
+
+    def _low_batch(self, episodes: Episodes, size: int, rng: np.random.Generator) -> Batch:
+        return sample_transitions(
+            episodes, size, rng, self.low_relabel_prob, self.reward_fn, self.low_window_end
+        )
+
+    def _high_batch(self, episodes: Episodes, size: int, rng: np.random.Generator) -> Batch:
+        return sample_segment_transitions(
+            episodes,
+            self.bounds,
+            size,
+            rng,
+            self.high_relabel_prob,
+            self.hindsight_action_prob,
+            self.reward_fn,
+        )
+
+    def store(self, episodes: Episodes, rng: np.random.Generator) -> None:
+        self.buffer.add(episodes)
+        # Each level normalises with the goals it will be trained on, relabelled ones included.
+        low = self._low_batch(episodes, episodes.count * self.buffer.horizon, rng)
+        self.low.update_normalizers(low.obs, low.goal)
+        high = self._high_batch(episodes, episodes.count * self.segments, rng)
+        self.high.update_normalizers(high.obs, high.goal)
+
+    def train(self, updates: int, rng: np.random.Generator) -> dict[str, float]:
+        stored = self.buffer.stored()
+        totals: dict[str, float] = {}
+        for _ in range(updates):
+            low_metrics = self.low.update(self._low_batch(stored, self.low.config.batch_size, rng))
+            high_metrics = self.high.update(self._high_batch(stored, self.high.config.batch_size, rng))
+            for name, value in low_metrics.items():
+                totals[name] = totals.get(name, 0.0) + value
+            for name, value in high_metrics.items():
+                totals["high_" + name] = totals.get("high_" + name, 0.0) + value
+        self.low.update_target()
+        self.high.update_target()
+        metrics = {name: value / updates for name, value in totals.items()} if updates else {}
+        metrics["subgoal_eps"] = self.eps
+        return metrics
+
+    def episode_metrics(self, episodes: Episodes) -> dict[str, float]:
+        """How the sub-goals of these episodes went: reached at their segment's end, and how
+        far they lay from the start and from the goal (intermediate sub-goals only)."""
+        starts, ends = self.bounds[:-2], self.bounds[1:-1]
+        subgoals = episodes.step_goal[:, starts]  # (B, N-1, G)
+        reached_goals = episodes.achieved_goal[:, ends]
+        goal_dim = subgoals.shape[-1]
+        rewards = self.reward_fn(reached_goals.reshape(-1, goal_dim), subgoals.reshape(-1, goal_dim))
+        start = episodes.achieved_goal[:, :1]
+        return {
+            "subgoal_reached": float(np.mean(rewards == 0.0)),
+            "subgoal_from_start": float(np.mean(np.linalg.norm(subgoals - start, axis=-1))),
+            "subgoal_from_goal": float(
+                np.mean(np.linalg.norm(subgoals - episodes.desired_goal[:, None], axis=-1))
+            ),
+        }
+
+    def plan(self, episodes: Episodes) -> list[dict[str, Any]]:
+        """Per episode: the start, each segment's sub-goal and what was reached, the goal."""
+        plans = []
+        for i in range(episodes.count):
+            plans.append(
+                {
+                    "start": episodes.achieved_goal[i, 0].tolist(),
+                    "subgoals": episodes.step_goal[i, self.bounds[:-1]].tolist(),
+                    "reached": episodes.achieved_goal[i, self.bounds[1:]].tolist(),
+                    "goal": episodes.desired_goal[i].tolist(),
+                    "success": bool(episodes.success[i]),
+                }
+            )
+        return plans
+
+    def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
+        state: dict[str, Any] = {"low": self.low.state_dict(), "high": self.high.state_dict()}
+        if include_replay:
+            state["buffer"] = self.buffer.state_dict()
+        return state
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.low.load_state_dict(state["low"])
+        self.high.load_state_dict(state["high"])
+        if "buffer" in state:
+            self.buffer.load_state_dict(state["buffer"])

@@ -1,0 +1,103 @@
+"""Episodes cut into segments, and the high level's transitions: pure, vectorised functions.
+
+Segment n covers steps ``bounds[n] .. bounds[n+1] - 1``; it starts from observation
+``bounds[n]`` and ends at observation ``bounds[n+1]``. One sub-goal is pursued per segment,
+the last segment's being the task's goal.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dtd.envs import RewardFn
+from dtd.her import future_indices
+from dtd.records import Batch, Episodes
+
+
+def segment_bounds(horizon: int, segments: int) -> np.ndarray:
+    """(segments + 1,) step indices where segments start, then the horizon; lengths differ
+    by at most one."""
+    if not 1 <= segments <= horizon:
+        raise ValueError(f"cannot cut {horizon} steps into {segments} segments")
+    return np.round(np.linspace(0, horizon, segments + 1)).astype(np.int64)
+
+
+def segment_of_step(bounds: np.ndarray) -> np.ndarray:
+    """(T,) the segment each step belongs to."""
+    return np.searchsorted(bounds, np.arange(bounds[-1]), side="right") - 1
+
+
+def segment_window_end(bounds: np.ndarray) -> np.ndarray:
+    """(T,) for each step, the index of the achieved goal that ends its segment."""
+    return bounds[segment_of_step(bounds) + 1]
+
+
+def segment_mean_reward(
+    achieved_goal: np.ndarray,
+    episode: np.ndarray,
+    start: np.ndarray,
+    stop: np.ndarray,
+    goal: np.ndarray,
+    reward_fn: RewardFn,
+) -> np.ndarray:
+    """Mean over steps t = start .. stop-1 of reward_fn(achieved_goal[episode, t + 1], goal)."""
+    longest = int(np.max(stop - start))
+    offsets = np.arange(longest)[None, :]
+    inside = offsets < (stop - start)[:, None]
+    reached = np.minimum(start[:, None] + 1 + offsets, stop[:, None])  # (B, L), clipped rows masked out
+    batch, goal_dim = goal.shape
+    rewards = reward_fn(
+        achieved_goal[episode[:, None], reached].reshape(-1, goal_dim),
+        np.repeat(goal, longest, axis=0),
+    ).reshape(batch, longest)
+    return np.sum(rewards * inside, axis=1) / (stop - start)
+
+
+def high_level_obs(episodes: Episodes, episode: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """The high level observes o || ag: it places sub-goals relative to the achieved goal."""
+    return np.concatenate([episodes.obs[episode, step], episodes.achieved_goal[episode, step]], axis=-1)
+
+
+def sample_segment_transitions(
+    episodes: Episodes,
+    bounds: np.ndarray,
+    batch_size: int,
+    rng: np.random.Generator,
+    relabel_prob: float,
+    hindsight_action_prob: float,
+    reward_fn: RewardFn,
+) -> Batch:
+    """High-level transitions, one per (episode, segment), with HER on the task's goal.
+
+    A transition is (o||ag at the segment's start, g, sub-goal, mean reward over the segment
+    against g, o||ag at its end), all from the same episode. With ``relabel_prob``, g is
+    replaced by a goal achieved later in the episode and the reward recomputed from the
+    stored achieved goals. With ``hindsight_action_prob``, a non-final segment's sub-goal is
+    replaced by the goal it actually reached. When the next segment is the last, its
+    sub-goal is the goal itself, so that is the next action to bootstrap from.
+    """
+    count = episodes.obs.shape[0]
+    segments = len(bounds) - 1
+    horizon = int(bounds[-1])
+    episode = rng.integers(0, count, size=batch_size)
+    segment = rng.integers(0, segments, size=batch_size)
+    relabel = rng.random(batch_size) < relabel_prob
+    uniform = rng.random(batch_size)
+    hindsight = (rng.random(batch_size) < hindsight_action_prob) & (segment < segments - 1)
+
+    start, stop = bounds[segment], bounds[segment + 1]
+    goal = episodes.desired_goal[episode].copy()
+    future = future_indices(start, np.full(batch_size, horizon), uniform)
+    goal[relabel] = episodes.achieved_goal[episode[relabel], future[relabel]]
+
+    subgoal = episodes.step_goal[episode, start].copy()
+    subgoal[hindsight] = episodes.achieved_goal[episode[hindsight], stop[hindsight]]
+    return Batch(
+        obs=high_level_obs(episodes, episode, start),
+        goal=goal,
+        action=subgoal,
+        reward=segment_mean_reward(episodes.achieved_goal, episode, start, stop, goal, reward_fn),
+        next_obs=high_level_obs(episodes, episode, stop),
+        next_action=goal,
+        next_action_given=segment + 1 >= segments - 1,
+    )

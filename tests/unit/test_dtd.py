@@ -1,0 +1,231 @@
+"""Dot-to-Dot on hand-made episodes: segments, high-level transitions and relabelling,
+sub-goal choice, the hand-over schedule, sub-goal bounds and rotations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from dtd.buffer import EpisodeBuffer
+from dtd.checkpoint import load_checkpoint, save_atomic
+from dtd.config import LearnerConfig
+from dtd.ddpg import DDPGLearner
+from dtd.exploration import ActionNoise
+from dtd.hierarchy import DotToDotAgent, HandOverSchedule, SubgoalExploration
+from dtd.networks import BoxActionHead, SubgoalHead
+from dtd.records import Episodes
+from dtd.segments import (
+    sample_segment_transitions,
+    segment_bounds,
+    segment_mean_reward,
+    segment_of_step,
+    segment_window_end,
+)
+
+T, OBS, GOAL, ACT = 10, 4, 3, 2
+
+
+def labelled_episodes(count: int = 3) -> Episodes:
+    """Achieved goal of episode e at step t is (e, t, 0); obs is (e, t, 0, 0) * 10;
+    the goal is (e, -1, 1); sub-goals are (e, t, 2) at each step."""
+    e = np.arange(count, dtype=np.float32)[:, None] * np.ones((1, T + 1), np.float32)
+    t = np.ones((count, 1), np.float32) * np.arange(T + 1, dtype=np.float32)[None]
+    achieved = np.stack([e, t, np.zeros_like(e)], axis=-1)
+    obs = np.concatenate([achieved, np.zeros((count, T + 1, 1), np.float32)], axis=-1) * 10
+    goal = np.stack([e[:, 0], -np.ones(count, np.float32), np.ones(count, np.float32)], axis=-1)
+    step_goal = np.stack([e[:, :T], t[:, :T], np.full((count, T), 2.0, np.float32)], axis=-1)
+    return Episodes(obs, achieved, obs[:, :T, :ACT].copy(), step_goal, goal, np.zeros(count, np.float32))
+
+
+def reached_reward(achieved: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    return -(np.linalg.norm(achieved - goal, axis=-1) > 1e-6).astype(np.float32)
+
+
+def test_segment_bounds_cover_the_episode_in_near_equal_parts():
+    assert segment_bounds(50, 2).tolist() == [0, 25, 50]
+    bounds = segment_bounds(10, 3)
+    assert bounds[0] == 0 and bounds[-1] == 10 and set(np.diff(bounds)) <= {3, 4}
+    assert segment_of_step(np.array([0, 5, 10])).tolist() == [0] * 5 + [1] * 5
+    # A step's relabelling window ends where its segment ends (not one step early or late).
+    assert segment_window_end(np.array([0, 5, 10])).tolist() == [5] * 5 + [10] * 5
+    with pytest.raises(ValueError):
+        segment_bounds(3, 4)
+
+
+def test_high_level_transitions_stay_in_their_episode():
+    episodes = labelled_episodes()
+    bounds = segment_bounds(T, 2)
+    batch = sample_segment_transitions(
+        episodes, bounds, 500, np.random.default_rng(0), 0.0, 0.0, reached_reward
+    )
+    episode, start = batch.obs[:, 0] / 10, batch.obs[:, 1] / 10
+    assert set(np.unique(start)) == {0, 5}
+    # o || ag at the segment's start; the next observation at its end, same episode.
+    assert np.array_equal(batch.obs[:, OBS:], np.stack([episode, start, 0 * start], axis=-1))
+    assert np.array_equal(batch.next_obs[:, 0] / 10, episode)
+    assert np.array_equal(batch.next_obs[:, 1] / 10, start + 5)
+    assert np.array_equal(batch.next_obs[:, OBS:], batch.next_obs[:, :3] / 10)
+    # The action is the sub-goal pursued in that segment; the goal is the episode's.
+    assert np.array_equal(batch.action, np.stack([episode, start, np.full_like(start, 2)], axis=-1))
+    assert np.array_equal(batch.goal, episodes.desired_goal[episode.astype(int)])
+    assert np.all(batch.reward == -1.0)  # the goal (e, -1, 1) is never reached
+    # With two segments, every next segment is the last: its sub-goal is the goal.
+    assert np.all(batch.next_action_given) and np.array_equal(batch.next_action, batch.goal)
+
+
+def test_next_action_is_only_given_for_the_last_segment():
+    bounds = segment_bounds(T, 3)
+    batch = sample_segment_transitions(
+        labelled_episodes(), bounds, 500, np.random.default_rng(1), 0.0, 0.0, reached_reward
+    )
+    start = batch.obs[:, 1] / 10
+    assert np.array_equal(batch.next_action_given, start >= bounds[1])
+
+
+def test_high_level_her_replaces_the_goal_by_a_later_achieved_goal_and_recomputes_the_reward():
+    episodes = labelled_episodes()
+    bounds = segment_bounds(T, 2)
+    batch = sample_segment_transitions(
+        episodes, bounds, 4000, np.random.default_rng(2), 0.8, 0.0, reached_reward
+    )
+    episode, start = batch.obs[:, 0] / 10, batch.obs[:, 1] / 10
+    relabelled = batch.goal[:, 1] >= 0  # achieved goals have t >= 0, the task's goal -1
+    assert 0.75 < relabelled.mean() < 0.85
+    assert np.all(batch.goal[relabelled, 0] == episode[relabelled])
+    assert np.all(batch.goal[relabelled, 1] > start[relabelled])
+    assert np.all(batch.goal[relabelled, 1] <= T)
+    # Mean over the segment's 5 steps: one step (the one reaching goal t) earns 0, if inside it.
+    inside = relabelled & (batch.goal[:, 1] <= start + 5)
+    expected = np.where(inside, -4 / 5, -1.0)
+    assert np.allclose(batch.reward, expected)
+    assert np.array_equal(batch.next_action, batch.goal)
+
+
+def test_segment_mean_reward_matches_a_loop():
+    rng = np.random.default_rng(3)
+    achieved = rng.integers(0, 2, size=(2, T + 1, 1)).astype(np.float32)
+    episode, start, stop = np.array([0, 1, 1]), np.array([0, 3, 7]), np.array([3, 7, 10])
+    goal = np.ones((3, 1), np.float32)
+    got = segment_mean_reward(achieved, episode, start, stop, goal, reached_reward)
+    for i in range(3):
+        steps = range(start[i], stop[i])
+        want = np.mean([reached_reward(achieved[episode[i], t + 1][None], goal[i][None])[0] for t in steps])
+        assert got[i] == pytest.approx(want)
+
+
+def test_hindsight_actions_replace_non_final_sub_goals_by_what_was_reached():
+    episodes = labelled_episodes()
+    bounds = segment_bounds(T, 2)
+    batch = sample_segment_transitions(
+        episodes, bounds, 500, np.random.default_rng(4), 0.0, 1.0, reached_reward
+    )
+    start = batch.obs[:, 1] / 10
+    first = start == 0
+    assert np.array_equal(batch.action[first], batch.next_obs[first, OBS:])  # reached at t = 5
+    assert np.all(batch.action[~first, 2] == 2.0)  # the last segment keeps its sub-goal
+
+
+def test_hand_over_schedule():
+    schedule = HandOverSchedule(start=1.0, floor=0.1, decay_epochs=10, episodes_per_epoch=100)
+    assert schedule.eps(0) == 1.0
+    assert schedule.eps(500) == pytest.approx(0.55)
+    assert schedule.eps(1000) == pytest.approx(0.1)
+    assert schedule.eps(10**6) == pytest.approx(0.1)
+    assert HandOverSchedule(1.0, 0.2, 0, 100).eps(0) == 0.2
+
+
+def test_sub_goals_stay_in_the_box_and_rotations_are_unit_quaternions():
+    low, high = (0, 0, 0, -1, -1, -1, -1), (1, 1, 1, 1, 1, 1, 1)
+    head = SubgoalHead(0.5, low, high, quaternion=(3, 7))
+    raw = torch.tensor([[5.0, -5.0, 0.5, 3.0, 0.0, 4.0, 0.0], [0.2, 0.2, 0.2, 0.0, 0.0, 0.0, 0.0]])
+    projected = head.project(raw)
+    assert torch.all(projected >= torch.tensor(low)) and torch.all(projected <= torch.tensor(high))
+    assert torch.allclose(torch.linalg.vector_norm(projected[:, 3:], dim=-1), torch.ones(2))
+    assert torch.allclose(projected[0, 3:], torch.tensor([0.6, 0.0, 0.8, 0.0]))  # clipped, then normalised
+    assert torch.equal(projected[1, 3:], torch.tensor([1.0, 0.0, 0.0, 0.0]))  # no direction: identity
+    # The head adds at most max_distance to the achieved goal (the last 7 obs entries).
+    obs = torch.cat([torch.zeros(2, 4), torch.full((2, 3), 0.5), torch.tensor([[1.0, 0, 0, 0]] * 2)], dim=-1)
+    out = head(torch.tensor([[1.0] * 7, [-1.0] * 7]), obs)
+    assert torch.allclose(out[:, :3], torch.tensor([[1.0] * 3, [0.0] * 3]))
+
+
+def make_agent(seed: int = 0, eps: float = 1.0) -> DotToDotAgent:
+    torch.manual_seed(seed)
+    config = LearnerConfig(hidden_sizes=(16,), batch_size=8)
+    low = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), config, 0.9)
+    head = SubgoalHead(0.3, (-1.0,) * GOAL, (60.0,) * GOAL, None)
+    high = DDPGLearner(OBS + GOAL, GOAL, GOAL, head, config, 0.5)
+    bounds = segment_bounds(T, 2)
+    return DotToDotAgent(
+        low=low,
+        high=high,
+        buffer=EpisodeBuffer(20, T, OBS, GOAL, ACT),
+        reward_fn=reached_reward,
+        bounds=bounds,
+        action_noise=ActionNoise(0.2, 0.3, 1.0),
+        exploration=SubgoalExploration(HandOverSchedule(eps, eps, 0, 1), sigma=0.1, noise=0.1),
+        low_relabel_prob=0.8,
+        low_window_end=segment_window_end(bounds),
+        high_relabel_prob=0.8,
+        hindsight_action_prob=0.0,
+    )
+
+
+@pytest.mark.parametrize("explore", [False, True])
+def test_sub_goals_change_at_segment_starts_only_and_the_last_is_the_goal(explore):
+    agent = make_agent(eps=0.5)
+    rng = np.random.default_rng(0)
+    obs, achieved = rng.normal(size=(4, OBS)), rng.normal(size=(4, GOAL))
+    goal = rng.normal(size=(4, GOAL))
+    chosen = [agent.step_goal(obs + t, achieved + t, goal, t, explore, rng).copy() for t in range(T)]
+    for t in range(1, 5):
+        assert np.array_equal(chosen[t], chosen[0])
+    assert not np.allclose(chosen[0], goal)
+    for t in range(5, T):
+        assert np.array_equal(chosen[t], goal)
+    if not explore:
+        assert np.allclose(chosen[0], agent.propose_subgoals(obs, achieved, goal))
+
+
+def test_perturbation_sub_goals_lie_around_the_achieved_goal():
+    agent = make_agent(eps=1.0)
+    rng = np.random.default_rng(1)
+    achieved = np.full((2000, GOAL), 10.0)
+    subgoal = agent.step_goal(np.zeros((2000, OBS)), achieved, np.zeros((2000, GOAL)), 0, True, rng)
+    assert np.allclose(subgoal.mean(axis=0), 10.0, atol=0.01)
+    assert np.allclose(subgoal.std(axis=0), 0.1, atol=0.01)
+
+
+def test_subgoal_values_are_the_high_level_critic_at_each_candidate():
+    agent = make_agent()
+    rng = np.random.default_rng(2)
+    agent.store(labelled_episodes(), rng)
+    agent.train(3, rng)
+    observation = {"observation": rng.normal(size=OBS), "achieved_goal": rng.normal(size=GOAL)}
+    goal, candidates = rng.normal(size=GOAL), rng.normal(size=(6, GOAL))
+    values = agent.subgoal_values(observation, goal, candidates)
+    high_obs = np.concatenate([observation["observation"], observation["achieved_goal"]])
+    for k in range(6):
+        direct = agent.high.q_values(high_obs[None], goal[None], candidates[k][None])[0]
+        assert values[k] == pytest.approx(direct, rel=1e-6)
+    assert len(set(np.round(values, 6))) > 1
+
+
+def test_training_reports_both_levels_and_checkpoints_round_trip(tmp_path):
+    agent = make_agent()
+    rng = np.random.default_rng(3)
+    agent.store(labelled_episodes(), rng)
+    metrics = agent.train(4, rng)
+    assert {"critic_loss", "high_critic_loss", "high_q_mean", "subgoal_eps"} <= set(metrics)
+    figures = agent.episode_metrics(labelled_episodes())
+    assert figures["subgoal_reached"] == 0.0  # sub-goals (e, t, 2) are never reached
+    assert figures["subgoal_from_start"] == pytest.approx(2.0)  # (e, 0, 2) vs (e, 0, 0)
+    save_atomic(tmp_path / "a.pt", agent.state_dict())
+    restored = make_agent(seed=9)
+    restored.load_state_dict(load_checkpoint(tmp_path / "a.pt"))
+    obs, achieved, goal = rng.normal(size=(3, OBS)), rng.normal(size=(3, GOAL)), rng.normal(size=(3, GOAL))
+    assert np.array_equal(
+        restored.propose_subgoals(obs, achieved, goal), agent.propose_subgoals(obs, achieved, goal)
+    )
+    assert np.array_equal(restored.act(obs, goal, False, rng), agent.act(obs, goal, False, rng))
