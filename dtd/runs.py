@@ -215,6 +215,42 @@ def train(
         close_all(components)
 
 
+@dataclasses.dataclass
+class LoadedRun:
+    """A trained run brought back: its settings, checkpoint and rebuilt components."""
+
+    run: RunDir
+    config: TrainConfig
+    checkpoint: Path
+    snapshot: dict[str, Any]
+    components: Components
+
+
+def load_run(run_dir: Path, checkpoint: str = "latest", seed: int = 1_000_003, envs: int = 1) -> LoadedRun:
+    """Rebuild a run's agent from a checkpoint, with ``envs`` evaluation environments seeded
+    by ``seed``; raises :class:`DtdError` subclasses for missing or foreign files."""
+    run = RunDir(Path(run_dir))
+    config = read_config(run)
+    path = run.checkpoint(checkpoint)
+    snapshot = load_checkpoint(path)
+    components = build(config, eval_seed=seed, eval_envs=envs)
+    try:
+        check_checkpoint(snapshot, config, components.spec, path)
+        components.agent.load_state_dict({k: v for k, v in snapshot["agent"].items() if k != "buffer"})
+    except BaseException:
+        close_all(components)
+        raise
+    return LoadedRun(run, config, path, snapshot, components)
+
+
+def load_agent(run_dir: Path | str, checkpoint: str = "latest") -> tuple[Agent, gym.Env]:
+    """A trained agent and an environment of its task, e.g. to query ``subgoal_values``."""
+    loaded = load_run(Path(run_dir), checkpoint)
+    for env in loaded.components.train_envs:
+        env.close()
+    return loaded.components.agent, loaded.components.eval_envs[0]
+
+
 def evaluate_run(
     run_dir: Path, episodes: int, checkpoint: str, seed: int, show_subgoals: bool = False
 ) -> dict[str, Any]:
@@ -222,16 +258,11 @@ def evaluate_run(
     high level's sub-goals per episode, when ``show_subgoals``)."""
     if episodes < 1:
         raise ConfigError(f"--episodes must be at least 1, got {episodes}")
-    run = RunDir(run_dir)
-    config = read_config(run)
+    config = read_config(RunDir(Path(run_dir)))
     if show_subgoals and config.algo is not Algo.dtd:
-        raise ConfigError(f"--show-subgoals needs a dtd run; {run.root} is a {config.algo.value} run")
-    path = run.checkpoint(checkpoint)
-    snapshot = load_checkpoint(path)
-    components = build(config, eval_seed=seed, eval_envs=min(episodes, 10))
-    check_checkpoint(snapshot, config, components.spec, path)
-    agent_state = {k: v for k, v in snapshot["agent"].items() if k != "buffer"}
-    components.agent.load_state_dict(agent_state)
+        raise ConfigError(f"--show-subgoals needs a dtd run; {run_dir} is a {config.algo.value} run")
+    loaded = load_run(run_dir, checkpoint, seed, envs=min(episodes, 10))
+    components = loaded.components
     try:
         played = run_many(
             components.eval_envs,
@@ -245,12 +276,12 @@ def evaluate_run(
         close_all(components)
     figures = episode_figures(components.agent, played)
     result: dict[str, Any] = {
-        "run_dir": str(run.root),
-        "checkpoint": str(path),
+        "run_dir": str(loaded.run.root),
+        "checkpoint": str(loaded.checkpoint),
         "env": config.env,
         "algo": config.algo.value,
-        "epoch": snapshot["state"]["epoch"],
-        "env_steps": snapshot["state"]["env_steps"],
+        "epoch": loaded.snapshot["state"]["epoch"],
+        "env_steps": loaded.snapshot["state"]["env_steps"],
         "episodes": episodes,
         "seed": seed,
         "success_rate": figures.pop("success"),

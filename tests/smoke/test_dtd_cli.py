@@ -73,3 +73,19 @@ def test_dtd_settings_are_checked(tmp_path):
     result = dtd("train", *DTD, "--high.actor-lr", "0", "--run-dir", tmp_path / "r")
     assert result.returncode == 2 and "--high.actor-lr must be > 0" in result.stderr
     assert not (tmp_path / "r").exists()
+
+
+def test_a_trained_high_level_can_be_queried_at_any_sub_goal(push_dtd):
+    import numpy as np
+
+    from dtd.hierarchy import DotToDotAgent
+    from dtd.runs import load_agent
+
+    agent, env = load_agent(push_dtd)
+    assert isinstance(agent, DotToDotAgent)
+    observation, _ = env.reset(seed=0)
+    grid = np.stack(np.meshgrid(np.linspace(1.1, 1.5, 4), np.linspace(0.5, 1.0, 3)), -1).reshape(-1, 2)
+    candidates = np.column_stack([grid, np.full(len(grid), 0.425)])
+    values = agent.subgoal_values(observation, observation["desired_goal"], candidates)
+    assert values.shape == (12,) and np.all(np.isfinite(values))
+    env.close()
