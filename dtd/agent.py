@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any, Protocol
 
 import numpy as np
@@ -54,6 +55,17 @@ class Agent(Protocol):
         ...
 
 
+def mean_metrics(per_update: Iterable[dict[str, float]]) -> dict[str, float]:
+    """The mean of each diagnostic over a series of updates (empty for no update)."""
+    totals: dict[str, float] = {}
+    count = 0
+    for metrics in per_update:
+        count += 1
+        for name, value in metrics.items():
+            totals[name] = totals.get(name, 0.0) + value
+    return {name: total / count for name, total in totals.items()}
+
+
 class GoalConditionedAgent:
     """DDPG (``GoalStrategy.none``) or DDPG + HER (``GoalStrategy.future``) toward the task's goal."""
 
@@ -101,15 +113,13 @@ class GoalConditionedAgent:
 
     def train(self, updates: int, rng: np.random.Generator) -> dict[str, float]:
         stored = self.buffer.stored()
-        totals: dict[str, float] = {}
-        for _ in range(updates):
-            batch = sample_transitions(
-                stored, self.learner.config.batch_size, rng, self.relabel_prob, self.reward_fn
-            )
-            for name, value in self.learner.update(batch).items():
-                totals[name] = totals.get(name, 0.0) + value
+        size = self.learner.config.batch_size
+        metrics = mean_metrics(
+            self.learner.update(sample_transitions(stored, size, rng, self.relabel_prob, self.reward_fn))
+            for _ in range(updates)
+        )
         self.learner.update_target()
-        return {name: value / updates for name, value in totals.items()} if updates else {}
+        return metrics
 
     def episode_metrics(self, episodes: Episodes) -> dict[str, float]:
         return {}

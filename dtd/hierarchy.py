@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from dtd.agent import mean_metrics
 from dtd.buffer import EpisodeBuffer
 from dtd.ddpg import DDPGLearner
 from dtd.envs import RewardFn
@@ -181,20 +182,18 @@ class DotToDotAgent:
         self.high.update_normalizers(high.obs, high.goal)
 
     def train(self, updates: int, rng: np.random.Generator) -> dict[str, float]:
+        # Algorithm 1 of the paper: both levels learn in the same phase, one batch each per update.
         stored = self.buffer.stored()
-        totals: dict[str, float] = {}
-        for _ in range(updates):
-            low_metrics = self.low.update(self._low_batch(stored, self.low.config.batch_size, rng))
-            high_metrics = self.high.update(self._high_batch(stored, self.high.config.batch_size, rng))
-            for name, value in low_metrics.items():
-                totals[name] = totals.get(name, 0.0) + value
-            for name, value in high_metrics.items():
-                totals["high_" + name] = totals.get("high_" + name, 0.0) + value
+        metrics = mean_metrics(self._update_both(stored, rng) for _ in range(updates))
         self.low.update_target()
         self.high.update_target()
-        metrics = {name: value / updates for name, value in totals.items()} if updates else {}
         metrics["subgoal_eps"] = self.eps
         return metrics
+
+    def _update_both(self, stored: Episodes, rng: np.random.Generator) -> dict[str, float]:
+        low = self.low.update(self._low_batch(stored, self.low.config.batch_size, rng))
+        high = self.high.update(self._high_batch(stored, self.high.config.batch_size, rng))
+        return {**low, **{"high_" + name: value for name, value in high.items()}}
 
     def episode_metrics(self, episodes: Episodes) -> dict[str, float]:
         """How the sub-goals of these episodes went: reached at their segment's end, and how
