@@ -171,10 +171,15 @@ def train(
             raise ConfigError("give the run directory once: --resume DIR (without --run-dir)")
         config = resumed_config(read_config(run), config)
         config.validate()
-        components = build(config)
+        # A run killed during its first epoch has no checkpoint yet: it starts again.
         snapshot = load_checkpoint(run.latest) if run.latest.exists() else None
+        components = build(config)
         if snapshot is not None:
-            check_checkpoint(snapshot, config, components.spec, run.latest)
+            try:
+                check_checkpoint(snapshot, config, components.spec, run.latest)
+            except CheckpointError:
+                close_all(components)
+                raise
     else:
         config.validate()
         run = RunDir(Path(run_dir) if run_dir is not None else default_run_dir(config))
