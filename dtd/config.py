@@ -54,7 +54,7 @@ class LearnerConfig:
     action_l2: float = 1.0
     """Weight of the actor's penalty on the squared (scaled) action."""
     gamma: float | None = None
-    """Discount factor; None means 1 - 1/T with T the episode horizon."""
+    """Discount; None: 1 - 1/T (T the horizon), and for dtd's high level gamma_low ** (T / segments)."""
     clip_return: bool = True
     """Clip the critic's target to [-1/(1-gamma), 0], the range of returns of a -1/0 reward."""
     norm_clip: float = 5.0
@@ -114,17 +114,15 @@ class TrainConfig:
     subgoal_noise: float = 0.05
     """dtd: std of the Gaussian exploration noise added to the high level's sub-goals."""
     subgoal_max_distance: float = 0.3
-    """dtd: the high level proposes sub-goals within this distance (per coordinate) of the
-    achieved goal, clipped to the goal box."""
+    """dtd: sub-goals lie within this distance (per coordinate) of the achieved goal, inside the goal box."""
     high_replay_k: int = 4
     """dtd: HER at the high level: goals replaced by later achieved goals in k/(k+1) of samples."""
     hindsight_action_prob: float = 0.0
-    """dtd: probability that a sampled high-level transition has its sub-goal replaced by the
-    goal actually reached at the segment's end (hindsight action relabelling)."""
+    """dtd: probability of replacing a sampled sub-goal by the goal reached at its segment's end."""
     low_relabel_window: RelabelWindow = RelabelWindow.segment
     """dtd: where the low level's relabelled goals come from."""
     high: LearnerConfig = HIGH_LEVEL_DEFAULTS
-    """dtd: settings of the high level's DDPG learner (gamma None: gamma_low ** (T / segments))."""
+    """dtd: settings of the high level's DDPG learner."""
 
     def validate(self) -> None:
         """Raise :class:`ConfigError` naming the first setting that cannot work."""
