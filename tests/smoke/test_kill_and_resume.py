@@ -18,9 +18,9 @@ pytestmark = pytest.mark.smoke
 ARGS = ["--env", "FetchReach-v4", "--epochs", "5", "--seed", "3", *TINY]
 
 
-def start(run_dir: Path) -> subprocess.Popen[bytes]:
+def start(run_dir: Path, algo: str = "her") -> subprocess.Popen[bytes]:
     return subprocess.Popen(
-        [sys.executable, "-m", "dtd", "train", *ARGS, "--run-dir", str(run_dir)],
+        [sys.executable, "-m", "dtd", "train", *ARGS, "--algo", algo, "--run-dir", str(run_dir)],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
@@ -45,21 +45,29 @@ def kill_when(process: subprocess.Popen[bytes], ready, extra_delay: float) -> No
 
 
 @pytest.fixture(scope="module")
-def uninterrupted(tmp_path_factory: pytest.TempPathFactory) -> list[dict[str, str]]:
-    run_dir = tmp_path_factory.mktemp("kill") / "reference"
-    assert dtd("train", *ARGS, "--run-dir", run_dir).returncode == 0
-    return without_times(read_metrics(run_dir))
+def uninterrupted(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[dict[str, str]]]:
+    reference = {}
+    for algo in ("her", "dtd"):
+        run_dir = tmp_path_factory.mktemp("kill") / algo
+        assert dtd("train", *ARGS, "--algo", algo, "--run-dir", run_dir).returncode == 0
+        reference[algo] = without_times(read_metrics(run_dir))
+    return reference
 
 
 @pytest.mark.parametrize(
-    ("label", "ready_epochs", "extra_delay"),
-    [("during the first epoch", 0, 0.1), ("after two epochs", 2, 0.0), ("a moment later", 2, 0.4)],
+    ("algo", "label", "ready_epochs", "extra_delay"),
+    [
+        ("her", "during the first epoch", 0, 0.1),
+        ("her", "after two epochs", 2, 0.0),
+        ("her", "a moment later", 2, 0.4),
+        ("dtd", "a moment later", 2, 0.3),
+    ],
 )
 def test_resume_after_kill_9_matches_an_uninterrupted_run(
-    tmp_path, uninterrupted, label, ready_epochs, extra_delay
+    tmp_path, uninterrupted, algo, label, ready_epochs, extra_delay
 ):
     run_dir = tmp_path / "run"
-    process = start(run_dir)
+    process = start(run_dir, algo)
     if ready_epochs:
         kill_when(process, lambda: finished_epochs(run_dir) >= ready_epochs, extra_delay)
     else:
@@ -70,5 +78,5 @@ def test_resume_after_kill_9_matches_an_uninterrupted_run(
 
     result = dtd("train", "--resume", run_dir, "--no-progress")
     assert result.returncode == 0, result.stderr
-    assert without_times(read_metrics(run_dir)) == uninterrupted
+    assert without_times(read_metrics(run_dir)) == uninterrupted[algo]
     assert not list(run_dir.rglob("*.tmp"))
