@@ -76,43 +76,45 @@ class Trainer:
 
     def train(self, state: TrainState) -> TrainState:
         """Train until ``config.epochs`` epochs are finished; checkpoint after each one."""
-        config = self.config
-        for epoch in range(state.epoch + 1, config.epochs + 1):
-            start = time.perf_counter()
-            sums: dict[str, float] = {}
-            collected = []
-            for cycle in range(1, config.n_cycles + 1):
-                episodes = run_episodes(self.train_envs, self.agent, self.spec, explore=True, rng=self.rng)
-                self.agent.store(episodes, self.rng)
-                for name, value in self.agent.train(config.updates_per_cycle, self.rng).items():
-                    sums[name] = sums.get(name, 0.0) + value
-                collected.append(episodes)
-                steps = episodes.count * self.spec.horizon
-                state.env_steps += steps
-                state.episodes += episodes.count
-                state.updates += config.updates_per_cycle
-                self.progress.advance(steps, epoch, steps * cycle / (time.perf_counter() - start))
-            evaluation = run_many(
-                self.eval_envs, self.agent, self.spec, config.test_episodes, explore=False, rng=self.rng
-            )
-            state.wall_s += time.perf_counter() - start
-            state.epoch = epoch
-            row: Row = {
-                "epoch": epoch,
-                "env_steps": state.env_steps,
-                "updates": state.updates,
-                "episodes": state.episodes,
-                "wall_s": round(state.wall_s, 3),
-                **_prefixed("eval_", episode_figures(self.agent, evaluation)),
-                **_prefixed("train_", episode_figures(self.agent, concatenate(collected))),
-                **{name: total / config.n_cycles for name, total in sums.items()},
-            }
+        for epoch in range(state.epoch + 1, self.config.epochs + 1):
+            row = self._epoch(state, epoch)
             state.history.append(row)
             self._save(state, improved=row["eval_success"] > state.best_eval_success)
             self.recorder.write_csv(state.history)
             self.recorder.log(row)
             self.progress.epoch_done(row)
         return state
+
+    def _epoch(self, state: TrainState, epoch: int) -> Row:
+        """Cycles of (collect, store, update), then evaluation; advances ``state``'s counters."""
+        config = self.config
+        start = time.perf_counter()
+        sums: dict[str, float] = {}
+        collected = []
+        for cycle in range(1, config.n_cycles + 1):
+            episodes = run_episodes(self.train_envs, self.agent, self.spec, explore=True, rng=self.rng)
+            self.agent.store(episodes, self.rng)
+            for name, value in self.agent.train(config.updates_per_cycle, self.rng).items():
+                sums[name] = sums.get(name, 0.0) + value
+            collected.append(episodes)
+            steps = episodes.count * self.spec.horizon
+            state.env_steps += steps
+            state.episodes += episodes.count
+            state.updates += config.updates_per_cycle
+            self.progress.advance(steps, epoch, steps * cycle / (time.perf_counter() - start))
+        evaluation = run_many(self.eval_envs, self.agent, self.spec, config.test_episodes, False, self.rng)
+        state.wall_s += time.perf_counter() - start
+        state.epoch = epoch
+        return {
+            "epoch": epoch,
+            "env_steps": state.env_steps,
+            "updates": state.updates,
+            "episodes": state.episodes,
+            "wall_s": round(state.wall_s, 3),
+            **_prefixed("eval_", episode_figures(self.agent, evaluation)),
+            **_prefixed("train_", episode_figures(self.agent, concatenate(collected))),
+            **{name: total / config.n_cycles for name, total in sums.items()},
+        }
 
     def _save(self, state: TrainState, improved: bool) -> None:
         if improved:
