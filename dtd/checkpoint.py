@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -10,7 +12,8 @@ import torch
 from dtd.atomic import write_atomic
 from dtd.errors import CheckpointError
 
-FORMAT_VERSION = 1
+# 2: learners save their action head (motor commands or sub-goals) apart from the actor.
+FORMAT_VERSION = 2
 
 
 def save_atomic(path: Path, state: dict[str, Any]) -> None:
@@ -34,3 +37,14 @@ def load_checkpoint(path: Path) -> dict[str, Any]:
             f"this dtd reads version {FORMAT_VERSION}"
         )
     return state
+
+
+@contextlib.contextmanager
+def restoring(path: Path) -> Iterator[None]:
+    """Report a checkpoint whose contents do not fit what loads them as a :class:`CheckpointError`."""
+    try:
+        yield
+    except (KeyError, TypeError, ValueError, RuntimeError) as exc:
+        raise CheckpointError(
+            f"checkpoint {path} does not fit this run ({type(exc).__name__}: {exc})"
+        ) from exc

@@ -12,7 +12,7 @@ import torch
 
 from dtd.agent import Agent, GoalConditionedAgent
 from dtd.buffer import EpisodeBuffer
-from dtd.checkpoint import load_checkpoint
+from dtd.checkpoint import load_checkpoint, restoring
 from dtd.config import Algo, RelabelWindow, TrainConfig, flat_items
 from dtd.ddpg import DDPGLearner
 from dtd.envs import EnvSpec, make_envs, reward_function
@@ -26,7 +26,7 @@ from dtd.recorder import MetricsRecorder
 from dtd.rollout import episode_figures, run_many
 from dtd.run_dir import RunDir, read_config, write_config
 from dtd.segments import segment_bounds, segment_window_end
-from dtd.trainer import Trainer, TrainState
+from dtd.trainer import Trainer, TrainState, restore
 
 # Settings that may change when a run is resumed; any other must stay as the run began.
 RESUMABLE_SETTINGS = frozenset({"epochs", "threads"})
@@ -174,9 +174,18 @@ def train(
         # A run killed during its first epoch has no checkpoint yet: it starts again.
         snapshot = load_checkpoint(run.latest) if run.latest.exists() else None
         components = build(config)
+        state = TrainState()
         if snapshot is not None:
             try:
                 check_checkpoint(snapshot, config, components.spec, run.latest)
+                state = restore(
+                    snapshot,
+                    components.agent,
+                    components.rng,
+                    components.train_envs,
+                    components.eval_envs,
+                    run.latest,
+                )
             except CheckpointError:
                 close_all(components)
                 raise
@@ -189,13 +198,13 @@ def train(
                 "or replace it with --force"
             )
         components = build(config)
-        snapshot = None
+        state = TrainState()
         if force:
             run.clear()
 
     write_config(run, config, {"spec": dataclasses.asdict(components.spec)})
     # TensorBoard events past the checkpoint came from an epoch that did not finish.
-    recorder = MetricsRecorder(run, resume_step=snapshot["state"]["env_steps"] + 1 if snapshot else 0)
+    recorder = MetricsRecorder(run, resume_step=state.env_steps + 1 if state.epoch else 0)
     total_steps = config.epochs * config.n_cycles * config.episodes_per_cycle * components.spec.horizon
     try:
         with TrainingProgress(total_steps, config.epochs, enabled=show_progress) as progress:
@@ -210,7 +219,6 @@ def train(
                 recorder,
                 progress,
             )
-            state = trainer.restore(snapshot) if snapshot is not None else TrainState()
             # metrics.csv is rebuilt from the checkpoint: rows of an unfinished epoch vanish.
             recorder.write_csv(state.history)
             progress.start_at(state.env_steps)
@@ -241,7 +249,8 @@ def load_run(run_dir: Path, checkpoint: str = "latest", seed: int = 1_000_003, e
     components = build(config, eval_seed=seed, eval_envs=envs)
     try:
         check_checkpoint(snapshot, config, components.spec, path)
-        components.agent.load_state_dict({k: v for k, v in snapshot["agent"].items() if k != "buffer"})
+        with restoring(path):
+            components.agent.load_state_dict({k: v for k, v in snapshot["agent"].items() if k != "buffer"})
     except BaseException:
         close_all(components)
         raise

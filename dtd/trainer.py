@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -15,7 +16,7 @@ import numpy as np
 import torch
 
 from dtd.agent import Agent
-from dtd.checkpoint import save_atomic
+from dtd.checkpoint import restoring, save_atomic
 from dtd.config import TrainConfig
 from dtd.envs import EnvSpec
 from dtd.progress import TrainingProgress
@@ -139,13 +140,22 @@ class Trainer:
             },
         }
 
-    def restore(self, snapshot: dict[str, Any]) -> TrainState:
-        """Load a :meth:`snapshot` (with replay) and return its counters."""
-        self.agent.load_state_dict(snapshot["agent"])
-        self.rng.bit_generator.state = snapshot["rng"]["numpy"]
+
+def restore(
+    snapshot: dict[str, Any],
+    agent: Agent,
+    rng: np.random.Generator,
+    train_envs: Sequence[gym.Env],
+    eval_envs: Sequence[gym.Env],
+    path: Path,
+) -> TrainState:
+    """Load a :meth:`Trainer.snapshot` (with replay) read from ``path``; return its counters."""
+    with restoring(path):
+        agent.load_state_dict(snapshot["agent"])
+        rng.bit_generator.state = snapshot["rng"]["numpy"]
         torch.set_rng_state(snapshot["rng"]["torch"])
-        restore_env_rng_states(self.train_envs, snapshot["rng"]["train_envs"])
-        restore_env_rng_states(self.eval_envs, snapshot["rng"]["eval_envs"])
+        restore_env_rng_states(train_envs, snapshot["rng"]["train_envs"])
+        restore_env_rng_states(eval_envs, snapshot["rng"]["eval_envs"])
         return TrainState(**snapshot["state"])
 
 

@@ -109,3 +109,18 @@ def test_checkpoint_from_another_environment(tmp_path, reach_run):
 
 def test_bad_eval_settings(reach_run):
     assert_refused(dtd("eval", reach_run, "--episodes", "0"), "--episodes must be at least 1")
+
+
+def test_checkpoint_that_does_not_fit_the_agent(tmp_path, reach_run):
+    import torch
+
+    run = tmp_path / "misfit"
+    shutil.copytree(reach_run, run)
+    latest = run / "checkpoints" / "latest.pt"
+    state = torch.load(latest, weights_only=True)
+    del state["agent"]["learner"]["actor"]
+    torch.save(state, latest)
+    before = tree_digest(run)
+    assert_refused(dtd("eval", run), "does not fit this run")
+    assert_refused(dtd("train", "--resume", run, "--epochs", "5"), "does not fit this run")
+    assert tree_digest(run) == before
