@@ -65,8 +65,10 @@ class LearnerConfig:
     """Smallest standard deviation the running normalisers divide by."""
 
 
-HIGH_LEVEL_DEFAULTS = LearnerConfig(action_l2=0.0)
-"""The high level's learner: as the low level's, but no penalty on sub-goals far from the start."""
+HIGH_LEVEL_DEFAULTS = LearnerConfig()
+"""The high level's learner: the reference settings, as the low level's. Its action penalty keeps
+sub-goals near the achieved goal until the critic says otherwise; without it (action_l2 = 0) the
+sub-goals of FetchPush ran to the corners of the goal box and were never reached."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -109,7 +111,7 @@ class TrainConfig:
     """dtd: probability of a perturbation sub-goal (instead of the high level's) at the start."""
     subgoal_eps_floor: float = 0.1
     """dtd: the probability of a perturbation sub-goal after the decay."""
-    subgoal_eps_decay_epochs: float = 10.0
+    subgoal_eps_decay_epochs: float = 30.0
     """dtd: epochs over which that probability falls linearly from start to floor."""
     subgoal_noise: float = 0.05
     """dtd: std of the Gaussian exploration noise added to the high level's sub-goals."""
