@@ -11,9 +11,7 @@ from __future__ import annotations
 
 import argparse
 import csv
-import dataclasses
 import json
-import math
 import platform
 from pathlib import Path
 
@@ -21,7 +19,7 @@ import torch
 
 from dtd.config import Algo, TrainConfig
 from dtd.run_dir import RunDir
-from dtd.runs import train
+from dtd.runs import train_for_steps
 
 
 def main() -> None:
@@ -47,14 +45,9 @@ def main() -> None:
     base = with_settings(
         TrainConfig(env=args.env, algo=Algo(args.algo), seed=args.seed, threads=args.threads), args.set
     )
-    steps_per_epoch = base.n_cycles * base.episodes_per_cycle * _horizon(args.env)
-    config = dataclasses.replace(base, epochs=math.ceil(args.steps / steps_per_epoch))
+    train_for_steps(base, args.steps, args.run_dir)
     run = RunDir(args.run_dir)
-    if run.latest.exists():
-        train(config, resume=run.root, show_progress=False)
-    else:
-        train(config, run_dir=run.root, force=run.holds_run(), show_progress=False)
-    report(run, [int(m) for m in args.marks.split(",")], config)
+    report(run, [int(m) for m in args.marks.split(",")], base)
 
 
 def with_settings(config: TrainConfig, settings: list[str]) -> TrainConfig:
@@ -97,16 +90,6 @@ def report(run: RunDir, marks: list[int], config: TrainConfig) -> None:
             f"{int(row['env_steps']):>10} {row['eval_success']:>12.3f} {best:>11.3f} {row['wall_s']:>8.0f}"
             + (f" {row['eval_subgoal_reached']:>15.3f}" if subgoals else "")
         )
-
-
-def _horizon(env_id: str) -> int:
-    from dtd.envs import make_env
-
-    env = make_env(env_id)
-    try:
-        return int(env.spec.max_episode_steps)
-    finally:
-        env.close()
 
 
 if __name__ == "__main__":

@@ -13,8 +13,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import dataclasses
-import math
 import platform
 import time
 from pathlib import Path
@@ -25,7 +23,7 @@ import torch
 from dtd.config import Algo, TrainConfig
 from dtd.envs import make_env
 from dtd.run_dir import RunDir
-from dtd.runs import train
+from dtd.runs import train_for_steps
 
 Curve = list[tuple[int, float, float]]  # (env steps, eval success, wall seconds)
 
@@ -82,14 +80,8 @@ def sb3_curve(env_id: str, steps: int, seed: int, eval_every: int, test_episodes
 
 def dtd_curve(env_id: str, steps: int, seed: int, run_dir: Path) -> Curve:
     """Train dtd's ``her`` (resuming a run left in ``run_dir``) and read its curve."""
-    base = TrainConfig(env=env_id, algo=Algo.her, seed=seed)
-    per_epoch = base.n_cycles * base.episodes_per_cycle * 50
-    config = dataclasses.replace(base, epochs=math.ceil(steps / per_epoch))
+    train_for_steps(TrainConfig(env=env_id, algo=Algo.her, seed=seed), steps, run_dir)
     run = RunDir(run_dir)
-    if run.latest.exists():
-        train(config, resume=run.root, show_progress=False)
-    else:
-        train(config, run_dir=run.root, force=run.holds_run(), show_progress=False)
     with open(run.metrics) as file:
         return [
             (int(r["env_steps"]), float(r["eval_success"]), float(r["wall_s"])) for r in csv.DictReader(file)

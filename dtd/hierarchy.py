@@ -18,7 +18,7 @@ from dtd.exploration import ActionNoise
 from dtd.her import sample_transitions
 from dtd.networks import SubgoalHead
 from dtd.records import Batch, Episodes
-from dtd.segments import sample_segment_transitions
+from dtd.segments import high_level_input, sample_segment_transitions
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,7 +101,7 @@ class DotToDotAgent:
         self, obs: np.ndarray, achieved_goal: np.ndarray, desired_goal: np.ndarray
     ) -> np.ndarray:
         """The high level's deterministic sub-goals pi1(o || ag, g) for a batch."""
-        return self.high.act(np.concatenate([obs, achieved_goal], axis=-1), desired_goal)
+        return self.high.act(high_level_input(obs, achieved_goal), desired_goal)
 
     def subgoal_values(
         self, observation: Mapping[str, np.ndarray], goal: np.ndarray, candidates: np.ndarray
@@ -114,8 +114,8 @@ class DotToDotAgent:
         """
         candidates = np.asarray(candidates, dtype=np.float32).reshape(-1, self.high.goal_norm.size)
         count = candidates.shape[0]
-        high_obs = np.concatenate(
-            [np.ravel(observation["observation"]), np.ravel(observation["achieved_goal"])]
+        high_obs = high_level_input(
+            np.ravel(observation["observation"]), np.ravel(observation["achieved_goal"])
         ).astype(np.float32)
         goals = np.ravel(goal).astype(np.float32)
         return self.high.q_values(np.tile(high_obs, (count, 1)), np.tile(goals, (count, 1)), candidates)

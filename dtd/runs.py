@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 from typing import Any
 
@@ -226,6 +227,25 @@ def train(
     finally:
         recorder.close()
         close_all(components)
+
+
+def train_for_steps(config: TrainConfig, steps: int, run_dir: Path) -> TrainState:
+    """Train until at least ``steps`` env steps, resuming a run already in ``run_dir``."""
+    horizon = env_spec_of(config).horizon
+    per_epoch = config.n_cycles * config.episodes_per_cycle * horizon
+    config = dataclasses.replace(config, epochs=math.ceil(steps / per_epoch))
+    run = RunDir(Path(run_dir))
+    if run.config.exists():
+        return train(config, resume=run.root, show_progress=False)
+    return train(config, run_dir=run.root, show_progress=False)
+
+
+def env_spec_of(config: TrainConfig) -> EnvSpec:
+    """The spec of ``config.env``, from a throw-away instance."""
+    assert config.env is not None
+    envs, spec = make_envs(config.env, 1)
+    envs[0].close()
+    return spec
 
 
 @dataclasses.dataclass

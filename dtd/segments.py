@@ -53,9 +53,14 @@ def segment_mean_reward(
     return np.sum(rewards * inside, axis=1) / (stop - start)
 
 
-def high_level_obs(episodes: Episodes, episode: np.ndarray, step: np.ndarray) -> np.ndarray:
+def high_level_input(obs: np.ndarray, achieved_goal: np.ndarray) -> np.ndarray:
     """The high level observes o || ag: it places sub-goals relative to the achieved goal."""
-    return np.concatenate([episodes.obs[episode, step], episodes.achieved_goal[episode, step]], axis=-1)
+    return np.concatenate([obs, achieved_goal], axis=-1)
+
+
+def high_level_obs(episodes: Episodes, episode: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """:func:`high_level_input` at stored steps."""
+    return high_level_input(episodes.obs[episode, step], episodes.achieved_goal[episode, step])
 
 
 def sample_segment_transitions(

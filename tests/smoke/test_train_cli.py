@@ -115,3 +115,17 @@ def test_every_task_of_the_paper_trains(tmp_path, env_id, obs_dim, algo):
     assert result.returncode == 0, result.stderr
     assert json.loads((run_dir / "config.json").read_text())["derived"]["spec"]["obs_dim"] == obs_dim
     assert len(read_metrics(run_dir)) == 1
+
+
+def test_train_for_steps_resumes_up_to_a_larger_budget(tmp_path):
+    from dtd.config import LearnerConfig
+    from dtd.runs import train_for_steps
+
+    config = TrainConfig(
+        env="FetchReach-v4", n_cycles=2, updates_per_cycle=2, test_episodes=1, buffer_size=5000,
+        learner=LearnerConfig(hidden_sizes=(16,), batch_size=16),
+    )  # fmt: skip
+    assert train_for_steps(config, 200, tmp_path / "run").env_steps == 200
+    state = train_for_steps(config, 450, tmp_path / "run")  # 2.25 epochs of 200 steps: 3 epochs
+    assert state.env_steps == 600
+    assert [int(r["epoch"]) for r in read_metrics(tmp_path / "run")] == [1, 2, 3]
