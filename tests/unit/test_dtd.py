@@ -11,6 +11,7 @@ from dtd.buffer import EpisodeBuffer
 from dtd.checkpoint import load_checkpoint, save_atomic
 from dtd.config import LearnerConfig
 from dtd.ddpg import DDPGLearner
+from dtd.envs import make_envs
 from dtd.exploration import ActionNoise
 from dtd.hierarchy import DotToDotAgent, HandOverSchedule, SubgoalExploration
 from dtd.networks import BoxActionHead, SubgoalHead
@@ -148,6 +149,20 @@ def test_sub_goals_stay_in_the_box_and_rotations_are_unit_quaternions():
     obs = torch.cat([torch.zeros(2, 4), torch.full((2, 3), 0.5), torch.tensor([[1.0, 0, 0, 0]] * 2)], dim=-1)
     out = head(torch.tensor([[1.0] * 7, [-1.0] * 7]), obs)
     assert torch.allclose(out[:, :3], torch.tensor([[1.0] * 3, [0.0] * 3]))
+
+
+def test_goal_box_pins_the_coordinates_no_goal_varies():
+    # FetchPush's goals and blocks all lie at table height: a sub-goal above or below it could
+    # never be reached, so the box leaves no room there; x and y get a margin beyond the goals.
+    envs, spec = make_envs("FetchPush-v4", 1)
+    low, high = np.array(spec.goal_low), np.array(spec.goal_high)
+    assert high[2] - low[2] < 1e-6 and low[2] == pytest.approx(0.4249, abs=1e-3)
+    goals = []
+    for seed in range(100, 120):
+        first, _ = envs[0].reset(seed=seed)
+        goals += [first["desired_goal"], first["achieved_goal"]]
+    assert np.all(np.array(goals)[:, :2] > low[:2]) and np.all(np.array(goals)[:, :2] < high[:2])
+    assert np.all(high[:2] - low[:2] < 0.5)
 
 
 def make_agent(seed: int = 0, eps: float = 1.0) -> DotToDotAgent:
