@@ -1,5 +1,6 @@
 """The DDPG learner: updates, targets, and save/load giving the same actions."""
 
+import copy
 import dataclasses
 
 import numpy as np
@@ -67,6 +68,39 @@ def test_an_update_changes_actor_and_critic_but_not_targets():
             not torch.equal(a, b) for a, b in zip(params, getattr(learner, name).parameters(), strict=True)
         )
         assert changed == (name in ("actor", "critic")), name
+
+
+def test_an_update_is_plain_ddpg_critic_step_then_actor_step():
+    # Reference: the textbook update with backward() and the per-tensor Adam.
+    learner = make_learner()
+    batch = random_batch(np.random.default_rng(3))
+    reference = copy.deepcopy(learner)
+    actor_optim = torch.optim.Adam(reference.actor.parameters(), lr=SMALL.actor_lr, foreach=False)
+    critic_optim = torch.optim.Adam(reference.critic.parameters(), lr=SMALL.critic_lr, foreach=False)
+    obs, next_obs = torch.as_tensor(batch.obs), torch.as_tensor(batch.next_obs)
+    inputs, next_inputs = reference.inputs(obs, batch.goal), reference.inputs(next_obs, batch.goal)
+    with torch.no_grad():
+        next_action = reference.head(reference.actor_target(next_inputs), next_obs)
+        next_q = reference.critic_target(next_inputs, next_action / 2.0)
+        target = torch.clamp(torch.as_tensor(batch.reward) + 0.9 * next_q, -10.0, 0.0)
+    critic_loss = torch.mean((reference.critic(inputs, torch.as_tensor(batch.action) / 2.0) - target) ** 2)
+    critic_optim.zero_grad()
+    critic_loss.backward()
+    critic_optim.step()
+    unit = reference.actor(inputs)
+    actor_loss = -reference.critic(inputs, unit).mean() + SMALL.action_l2 * torch.mean(unit**2)
+    actor_optim.zero_grad()
+    actor_loss.backward()
+    actor_optim.step()
+
+    metrics = learner.update(batch)
+    assert metrics["critic_loss"] == pytest.approx(critic_loss.item(), rel=1e-5)
+    assert metrics["actor_loss"] == pytest.approx(actor_loss.item(), rel=1e-5, abs=1e-6)
+    for net in ("actor", "critic"):
+        for ours, theirs in zip(
+            getattr(learner, net).parameters(), getattr(reference, net).parameters(), strict=True
+        ):
+            assert torch.allclose(ours, theirs, atol=1e-6), net
 
 
 def test_target_moves_by_one_minus_polyak():
