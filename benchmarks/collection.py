@@ -17,8 +17,7 @@ import mujoco
 import numpy as np
 import torch
 
-from dtd.config import Algo, TrainConfig
-from dtd.rollout import run_episodes
+from dtd.config import Algo, Collection, TrainConfig
 from dtd.runs import build, close_all
 
 
@@ -35,16 +34,16 @@ def raw_physics_rate(env, steps: int) -> float:
 
 def collection_rate(config: TrainConfig, episodes: int) -> tuple[float, int]:
     """Env steps per second of exploring episodes with a fresh agent, and the steps run."""
-    components = build(config)
+    components = build(config, collection=Collection.inline)
+    collector = components.collector
     try:
-        run_episodes(components.train_envs, components.agent, components.spec, True, components.rng)
+        collector.submit()
+        collector.result()  # warm up
         steps = 0
         start = time.perf_counter()
         while steps < episodes * components.spec.horizon:
-            batch = run_episodes(
-                components.train_envs, components.agent, components.spec, True, components.rng
-            )
-            steps += batch.count * components.spec.horizon
+            collector.submit()
+            steps += collector.result().count * components.spec.horizon
         return steps / (time.perf_counter() - start), steps
     finally:
         close_all(components)
@@ -61,8 +60,8 @@ def main() -> None:
     args = parser.parse_args()
 
     config = TrainConfig(env=args.env, algo=Algo(args.algo), episodes_per_cycle=args.envs)
-    components = build(config)
-    raw = raw_physics_rate(components.train_envs[0], steps=args.episodes * components.spec.horizon)
+    components = build(config, collection=Collection.inline)
+    raw = raw_physics_rate(components.eval_envs[0], steps=args.episodes * components.spec.horizon)
     close_all(components)
     rate, steps = collection_rate(config, args.episodes)
     threads = torch.get_num_threads()

@@ -50,6 +50,14 @@ class Agent(Protocol):
         """Plain data of everything the agent learned (and, optionally, its replay)."""
         ...
 
+    def acting_state(self) -> dict[str, Any]:
+        """Plain data of what exploring episodes need: a copy given it acts as this agent."""
+        ...
+
+    def load_acting_state(self, state: dict[str, Any]) -> None:
+        """Restore what :meth:`acting_state` returned."""
+        ...
+
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore what :meth:`state_dict` returned."""
         ...
@@ -129,6 +137,12 @@ class GoalConditionedAgent:
         if include_replay:
             state["buffer"] = self.buffer.state_dict()
         return state
+
+    def acting_state(self) -> dict[str, Any]:
+        return {"learner": self.learner.acting_state()}
+
+    def load_acting_state(self, state: dict[str, Any]) -> None:
+        self.learner.load_acting_state(state["learner"])
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.learner.load_state_dict(state["learner"])

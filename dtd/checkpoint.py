@@ -13,7 +13,10 @@ from dtd.atomic import write_atomic
 from dtd.errors import CheckpointError
 
 # 2: learners save their action head (motor commands or sub-goals) apart from the actor.
-FORMAT_VERSION = 2
+# 3: exploration draws from a generator of its own, saved with the collector's environments.
+FORMAT_VERSION = 3
+READABLE_VERSIONS = frozenset({2, 3})
+"""Versions whose agents load; a run resumes only from the current version."""
 
 
 def save_atomic(path: Path, state: dict[str, Any]) -> None:
@@ -31,10 +34,10 @@ def load_checkpoint(path: Path) -> dict[str, Any]:
         raise CheckpointError(f"checkpoint {path} is corrupt or unreadable ({type(exc).__name__})") from exc
     if not isinstance(state, dict) or "format_version" not in state:
         raise CheckpointError(f"{path} is not a dtd checkpoint")
-    if state["format_version"] != FORMAT_VERSION:
+    if state["format_version"] not in READABLE_VERSIONS:
         raise CheckpointError(
             f"checkpoint {path} has format version {state['format_version']}; "
-            f"this dtd reads version {FORMAT_VERSION}"
+            f"this dtd reads versions {', '.join(map(str, sorted(READABLE_VERSIONS)))}"
         )
     return state
 

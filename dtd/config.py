@@ -37,6 +37,19 @@ class RelabelWindow(enum.Enum):
     """From anywhere later in the episode, as in plain HER."""
 
 
+class Collection(enum.Enum):
+    """Where training episodes are collected. Either way the run is the same, step for step:
+    a cycle's episodes are collected while the learner makes the previous cycle's updates,
+    with the policy from before them; only the wall time differs."""
+
+    auto = "auto"
+    """``process`` on a machine with at least two cores, else ``inline``."""
+    inline = "inline"
+    """In the learner's process, between its updates."""
+    process = "process"
+    """In a process of its own beside the learner, during the learner's updates."""
+
+
 @dataclasses.dataclass(frozen=True)
 class LearnerConfig:
     """Settings of one DDPG learner (actor, critic, their targets and input normalisers)."""
@@ -101,6 +114,8 @@ class TrainConfig:
     """Exploration: probability of taking a uniformly random action instead."""
     threads: int = 1
     """Torch threads for the learner; 1 makes runs reproducible bit for bit."""
+    collector: Collection = Collection.auto
+    """Where training episodes are collected (a matter of speed only; the run is the same)."""
     learner: tyro.conf.OmitArgPrefixes[LearnerConfig] = LearnerConfig()
     """Settings of the DDPG learner (of the low level, for dtd)."""
     segments: int = 2
@@ -123,6 +138,8 @@ class TrainConfig:
     """dtd: probability of replacing a sampled sub-goal by the goal reached at its segment's end."""
     low_relabel_window: RelabelWindow = RelabelWindow.segment
     """dtd: where the low level's relabelled goals come from."""
+    high_updates_per_cycle: int = 40
+    """dtd: gradient updates of the high level per cycle (it gets one transition per segment)."""
     high: LearnerConfig = HIGH_LEVEL_DEFAULTS
     """dtd: settings of the high level's DDPG learner."""
 
@@ -176,6 +193,10 @@ class TrainConfig:
             ),
             (self.high_replay_k >= 0, f"--high-replay-k must be 0 or more, got {self.high_replay_k}"),
             (
+                self.high_updates_per_cycle >= 1,
+                f"--high-updates-per-cycle must be at least 1, got {self.high_updates_per_cycle}",
+            ),
+            (
                 _finite_in(self.hindsight_action_prob, 0, 1),
                 f"--hindsight-action-prob must lie in [0, 1], got {self.hindsight_action_prob}",
             ),
@@ -200,7 +221,7 @@ class TrainConfig:
             for name, default in (("learner", LearnerConfig()), ("high", HIGH_LEVEL_DEFAULTS))
             if name in data
         }
-        for name, kind in (("algo", Algo), ("low_relabel_window", RelabelWindow)):
+        for name, kind in (("algo", Algo), ("low_relabel_window", RelabelWindow), ("collector", Collection)):
             if name in data:
                 try:
                     data[name] = kind(data[name])

@@ -150,6 +150,22 @@ class DDPGLearner:
             "goal_norm": self.goal_norm.state_dict(),
         }
 
+    def acting_state(self) -> dict[str, Any]:
+        """What :meth:`act` needs (head, actor, normalisers), for a copy that only acts."""
+        return {
+            "head": self.head.state_dict(),
+            "actor": self.actor.state_dict(),
+            "obs_norm": self.obs_norm.state_dict(),
+            "goal_norm": self.goal_norm.state_dict(),
+        }
+
+    def load_acting_state(self, state: dict[str, Any]) -> None:
+        """Restore what :meth:`acting_state` returned."""
+        self.head.load_state_dict(state["head"])
+        self.actor.load_state_dict(state["actor"])
+        self.obs_norm.load_state_dict(state["obs_norm"])
+        self.goal_norm.load_state_dict(state["goal_norm"])
+
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore what :meth:`state_dict` returned."""
         self.head.load_state_dict(state["head"])

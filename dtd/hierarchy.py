@@ -71,6 +71,7 @@ class DotToDotAgent:
         low_window_end: np.ndarray | None,
         high_relabel_prob: float,
         hindsight_action_prob: float,
+        high_updates: int,
     ) -> None:
         if not isinstance(high.head, SubgoalHead):
             raise TypeError("the high level's learner must propose sub-goals (a SubgoalHead)")
@@ -86,6 +87,8 @@ class DotToDotAgent:
         self.low_window_end = low_window_end
         self.high_relabel_prob = high_relabel_prob
         self.hindsight_action_prob = hindsight_action_prob
+        self.high_updates = high_updates
+        """High-level updates per call of :meth:`train`."""
         self._subgoal: np.ndarray | None = None
 
     @property
@@ -182,18 +185,21 @@ class DotToDotAgent:
         self.high.update_normalizers(high.obs, high.goal)
 
     def train(self, updates: int, rng: np.random.Generator) -> dict[str, float]:
-        # Algorithm 1 of the paper: both levels learn in the same phase, one batch each per update.
+        """``updates`` low-level updates with the high level's ``high_updates`` spread evenly
+        among them (Algorithm 1 of the paper: both levels learn in the same phase)."""
         stored = self.buffer.stored()
-        metrics = mean_metrics(self._update_both(stored, rng) for _ in range(updates))
+        low_metrics, high_metrics = [], []
+        for i in range(updates):
+            low_metrics.append(self.low.update(self._low_batch(stored, self.low.config.batch_size, rng)))
+            for _ in range((i + 1) * self.high_updates // updates - i * self.high_updates // updates):
+                batch = self._high_batch(stored, self.high.config.batch_size, rng)
+                high_metrics.append(self.high.update(batch))
         self.low.update_target()
         self.high.update_target()
+        metrics = mean_metrics(low_metrics)
+        metrics.update({"high_" + name: value for name, value in mean_metrics(high_metrics).items()})
         metrics["subgoal_eps"] = self.eps
         return metrics
-
-    def _update_both(self, stored: Episodes, rng: np.random.Generator) -> dict[str, float]:
-        low = self.low.update(self._low_batch(stored, self.low.config.batch_size, rng))
-        high = self.high.update(self._high_batch(stored, self.high.config.batch_size, rng))
-        return {**low, **{"high_" + name: value for name, value in high.items()}}
 
     def episode_metrics(self, episodes: Episodes) -> dict[str, float]:
         """How the sub-goals of these episodes went: reached at their segment's end, and how
@@ -232,6 +238,19 @@ class DotToDotAgent:
         if include_replay:
             state["buffer"] = self.buffer.state_dict()
         return state
+
+    def acting_state(self) -> dict[str, Any]:
+        # The episodes seen set the hand-over schedule's eps.
+        return {
+            "low": self.low.acting_state(),
+            "high": self.high.acting_state(),
+            "episodes_added": self.buffer.episodes_added,
+        }
+
+    def load_acting_state(self, state: dict[str, Any]) -> None:
+        self.low.load_acting_state(state["low"])
+        self.high.load_acting_state(state["high"])
+        self.buffer.episodes_added = int(state["episodes_added"])
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.low.load_state_dict(state["low"])

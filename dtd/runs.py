@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+import os
 from pathlib import Path
 from typing import Any
 
@@ -13,8 +15,9 @@ import torch
 
 from dtd.agent import Agent, GoalConditionedAgent
 from dtd.buffer import EpisodeBuffer
-from dtd.checkpoint import load_checkpoint, restoring
-from dtd.config import Algo, RelabelWindow, TrainConfig, flat_items
+from dtd.checkpoint import FORMAT_VERSION, load_checkpoint, restoring
+from dtd.collector import Collector, InlineCollector, ProcessCollector
+from dtd.config import Algo, Collection, RelabelWindow, TrainConfig, flat_items
 from dtd.ddpg import DDPGLearner
 from dtd.envs import EnvSpec, make_envs, reward_function
 from dtd.errors import CheckpointError, ConfigError, RunDirError
@@ -30,7 +33,7 @@ from dtd.segments import segment_bounds, segment_window_end
 from dtd.trainer import Trainer, TrainState, restore
 
 # Settings that may change when a run is resumed; any other must stay as the run began.
-RESUMABLE_SETTINGS = frozenset({"epochs", "threads"})
+RESUMABLE_SETTINGS = frozenset({"epochs", "threads", "collector"})
 _RESUMABLE_FLAGS = ", ".join("--" + name for name in sorted(RESUMABLE_SETTINGS))
 
 
@@ -40,9 +43,11 @@ class Components:
 
     spec: EnvSpec
     agent: Agent
-    train_envs: list[gym.Env]
+    collector: Collector
+    """Exploring episodes of the training environments."""
     eval_envs: list[gym.Env]
     rng: np.random.Generator
+    """Replay sampling (and anything else the learner draws)."""
 
 
 def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env) -> Agent:
@@ -90,33 +95,78 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env) -> Agent:
         low_window_end=window,
         high_relabel_prob=relabel_probability(GoalStrategy.future, config.high_replay_k),
         hindsight_action_prob=config.hindsight_action_prob,
+        high_updates=config.high_updates_per_cycle,
     )
 
 
-def build(config: TrainConfig, eval_seed: int | None = None, eval_envs: int | None = None) -> Components:
-    """Environments, agent and random generator for ``config``, all seeded from ``config.seed``.
+def build(
+    config: TrainConfig,
+    eval_seed: int | None = None,
+    eval_envs: int | None = None,
+    collection: Collection | None = None,
+) -> Components:
+    """Environments, agent, collector and random generators for ``config``, all seeded from
+    ``config.seed``.
 
-    ``eval_seed`` seeds the evaluation environments apart from training (``dtd eval``).
+    ``eval_seed`` seeds the evaluation environments apart from training (``dtd eval``);
+    ``collection`` overrides ``config.collector``.
     """
     config.validate()
     assert config.env is not None
     torch.set_num_threads(config.threads)
     torch.manual_seed(config.seed)
-    train_seq, eval_seq, rng_seq = np.random.SeedSequence(config.seed).spawn(3)
+    train_seq, eval_seq, rng_seq, explore_seq = np.random.SeedSequence(config.seed).spawn(4)
     if eval_seed is not None:
         eval_seq = np.random.SeedSequence([eval_seed, 1])
     n_eval = eval_envs or min(config.test_episodes, config.episodes_per_cycle)
-    train, spec = make_envs(config.env, config.episodes_per_cycle)
-    evaluation, _ = make_envs(config.env, n_eval)
+    evaluation, spec = seeded_envs(config.env, n_eval, eval_seq)
     if config.buffer_size < spec.horizon:
+        close_envs(evaluation)
         raise ConfigError(
             f"--buffer-size must hold one episode ({spec.horizon} steps), got {config.buffer_size}"
         )
-    for envs, seq in ((train, train_seq), (evaluation, eval_seq)):
-        for env, seed in zip(envs, seq.generate_state(len(envs)), strict=True):
-            env.reset(seed=int(seed))
-    agent = build_agent(config, spec, train[0])
-    return Components(spec, agent, train, evaluation, np.random.default_rng(rng_seq))
+    agent = build_agent(config, spec, evaluation[0])
+    exploring_side = functools.partial(_exploring_side, config, train_seq, explore_seq)
+    try:
+        if resolved_collection(collection or config.collector) is Collection.process:
+            collector: Collector = ProcessCollector(exploring_side, agent)
+        else:
+            train, _, _, explore_rng = exploring_side(agent)
+            collector = InlineCollector(train, agent, spec, explore_rng)
+    except BaseException:
+        close_envs(evaluation)
+        raise
+    return Components(spec, agent, collector, evaluation, np.random.default_rng(rng_seq))
+
+
+def resolved_collection(collection: Collection) -> Collection:
+    """``auto`` made concrete: a collecting process when this process may use two cores."""
+    if collection is not Collection.auto:
+        return collection
+    return Collection.process if len(os.sched_getaffinity(0)) >= 2 else Collection.inline
+
+
+def seeded_envs(env_id: str, count: int, seeds: np.random.SeedSequence) -> tuple[list[gym.Env], EnvSpec]:
+    """``count`` environments of ``env_id``, each reset once with its own seed from ``seeds``."""
+    envs, spec = make_envs(env_id, count)
+    for env, seed in zip(envs, seeds.generate_state(count), strict=True):
+        env.reset(seed=int(seed))
+    return envs, spec
+
+
+def _exploring_side(
+    config: TrainConfig,
+    train_seq: np.random.SeedSequence,
+    explore_seq: np.random.SeedSequence,
+    agent: Agent | None = None,
+) -> tuple[list[gym.Env], Agent, EnvSpec, np.random.Generator]:
+    """The training environments and exploration generator; with no ``agent``, also a copy
+    that only acts (in a collecting process: it holds no replay)."""
+    assert config.env is not None
+    train, spec = seeded_envs(config.env, config.episodes_per_cycle, train_seq)
+    if agent is None:
+        agent = build_agent(dataclasses.replace(config, buffer_size=spec.horizon), spec, train[0])
+    return train, agent, spec, np.random.default_rng(explore_seq)
 
 
 def default_run_dir(config: TrainConfig) -> Path:
@@ -179,11 +229,16 @@ def train(
         if snapshot is not None:
             try:
                 check_checkpoint(snapshot, config, components.spec, run.latest)
+                if snapshot["format_version"] != FORMAT_VERSION:
+                    raise CheckpointError(
+                        f"checkpoint {run.latest} was written by an older dtd (format "
+                        f"{snapshot['format_version']}); it can be evaluated but not resumed"
+                    )
                 state = restore(
                     snapshot,
                     components.agent,
                     components.rng,
-                    components.train_envs,
+                    components.collector,
                     components.eval_envs,
                     run.latest,
                 )
@@ -213,7 +268,7 @@ def train(
                 config,
                 components.spec,
                 components.agent,
-                components.train_envs,
+                components.collector,
                 components.eval_envs,
                 components.rng,
                 run,
@@ -266,7 +321,7 @@ def load_run(run_dir: Path, checkpoint: str = "latest", seed: int = 1_000_003, e
     config = read_config(run)
     path = run.checkpoint(checkpoint)
     snapshot = load_checkpoint(path)
-    components = build(config, eval_seed=seed, eval_envs=envs)
+    components = build(config, eval_seed=seed, eval_envs=envs, collection=Collection.inline)
     try:
         check_checkpoint(snapshot, config, components.spec, path)
         with restoring(path):
@@ -280,8 +335,7 @@ def load_run(run_dir: Path, checkpoint: str = "latest", seed: int = 1_000_003, e
 def load_agent(run_dir: Path | str, checkpoint: str = "latest") -> tuple[Agent, gym.Env]:
     """A trained agent and an environment of its task, e.g. to query ``subgoal_values``."""
     loaded = load_run(Path(run_dir), checkpoint)
-    for env in loaded.components.train_envs:
-        env.close()
+    loaded.components.collector.close()
     return loaded.components.agent, loaded.components.eval_envs[0]
 
 
@@ -329,6 +383,12 @@ def evaluate_run(
 
 
 def close_all(components: Components) -> None:
-    """Close every environment of ``components``."""
-    for env in components.train_envs + components.eval_envs:
+    """Close every environment (and the collecting process) of ``components``."""
+    components.collector.close()
+    close_envs(components.eval_envs)
+
+
+def close_envs(envs: list[gym.Env]) -> None:
+    """Close each of ``envs``."""
+    for env in envs:
         env.close()

@@ -17,11 +17,12 @@ import torch
 
 from dtd.agent import Agent
 from dtd.checkpoint import restoring, save_atomic
+from dtd.collector import Collector, env_rng_states, restore_env_rng_states
 from dtd.config import TrainConfig
 from dtd.envs import EnvSpec
 from dtd.progress import TrainingProgress
 from dtd.recorder import MetricsRecorder, Row
-from dtd.rollout import concatenate, episode_figures, run_episodes, run_many
+from dtd.rollout import concatenate, episode_figures, run_many
 from dtd.run_dir import RunDir
 
 
@@ -39,17 +40,6 @@ class TrainState:
     history: list[Row] = dataclasses.field(default_factory=list)
 
 
-def env_rng_states(envs: Sequence[gym.Env]) -> list[dict[str, Any]]:
-    """The random state of each environment (it draws initial states and goals)."""
-    return [env.unwrapped.np_random.bit_generator.state for env in envs]
-
-
-def restore_env_rng_states(envs: Sequence[gym.Env], states: Sequence[dict[str, Any]]) -> None:
-    """Inverse of :func:`env_rng_states`."""
-    for env, state in zip(envs, states, strict=True):
-        env.unwrapped.np_random.bit_generator.state = state
-
-
 class Trainer:
     """Runs epochs from a :class:`TrainState` to ``config.epochs``."""
 
@@ -58,7 +48,7 @@ class Trainer:
         config: TrainConfig,
         spec: EnvSpec,
         agent: Agent,
-        train_envs: Sequence[gym.Env],
+        collector: Collector,
         eval_envs: Sequence[gym.Env],
         rng: np.random.Generator,
         run: RunDir,
@@ -68,7 +58,7 @@ class Trainer:
         self.config = config
         self.spec = spec
         self.agent = agent
-        self.train_envs = train_envs
+        self.collector = collector
         self.eval_envs = eval_envs
         self.rng = rng
         self.run = run
@@ -92,9 +82,14 @@ class Trainer:
         start = time.perf_counter()
         sums: dict[str, float] = {}
         collected = []
+        self.collector.submit()
         for cycle in range(1, config.n_cycles + 1):
-            episodes = run_episodes(self.train_envs, self.agent, self.spec, explore=True, rng=self.rng)
+            episodes = self.collector.result()
             self.agent.store(episodes, self.rng)
+            # The next cycle's episodes are collected while this cycle's updates run (in a
+            # collecting process, at the same time; inline, just before them).
+            if cycle < config.n_cycles:
+                self.collector.submit()
             for name, value in self.agent.train(config.updates_per_cycle, self.rng).items():
                 sums[name] = sums.get(name, 0.0) + value
             collected.append(episodes)
@@ -135,7 +130,7 @@ class Trainer:
             "rng": {
                 "numpy": self.rng.bit_generator.state,
                 "torch": torch.get_rng_state(),
-                "train_envs": env_rng_states(self.train_envs),
+                "collector": self.collector.state_dict(),
                 "eval_envs": env_rng_states(self.eval_envs),
             },
         }
@@ -145,7 +140,7 @@ def restore(
     snapshot: dict[str, Any],
     agent: Agent,
     rng: np.random.Generator,
-    train_envs: Sequence[gym.Env],
+    collector: Collector,
     eval_envs: Sequence[gym.Env],
     path: Path,
 ) -> TrainState:
@@ -154,7 +149,7 @@ def restore(
         agent.load_state_dict(snapshot["agent"])
         rng.bit_generator.state = snapshot["rng"]["numpy"]
         torch.set_rng_state(snapshot["rng"]["torch"])
-        restore_env_rng_states(train_envs, snapshot["rng"]["train_envs"])
+        collector.load_state_dict(snapshot["rng"]["collector"])
         restore_env_rng_states(eval_envs, snapshot["rng"]["eval_envs"])
         return TrainState(**snapshot["state"])
 

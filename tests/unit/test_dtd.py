@@ -165,7 +165,7 @@ def test_goal_box_pins_the_coordinates_no_goal_varies():
     assert np.all(high[:2] - low[:2] < 0.5)
 
 
-def make_agent(seed: int = 0, eps: float = 1.0) -> DotToDotAgent:
+def make_agent(seed: int = 0, eps: float = 1.0, high_updates: int = 4) -> DotToDotAgent:
     torch.manual_seed(seed)
     config = LearnerConfig(hidden_sizes=(16,), batch_size=8)
     low = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), config, 0.9)
@@ -184,6 +184,7 @@ def make_agent(seed: int = 0, eps: float = 1.0) -> DotToDotAgent:
         low_window_end=segment_window_end(bounds),
         high_relabel_prob=0.8,
         hindsight_action_prob=0.0,
+        high_updates=high_updates,
     )
 
 
@@ -244,3 +245,19 @@ def test_training_reports_both_levels_and_checkpoints_round_trip(tmp_path):
         restored.propose_subgoals(obs, achieved, goal), agent.propose_subgoals(obs, achieved, goal)
     )
     assert np.array_equal(restored.act(obs, goal, False, rng), agent.act(obs, goal, False, rng))
+
+
+@pytest.mark.parametrize(("updates", "high_updates"), [(10, 2), (10, 10), (3, 7)])
+def test_the_high_level_makes_its_own_number_of_updates_spread_among_the_low_levels(updates, high_updates):
+    agent = make_agent(high_updates=high_updates)
+    calls: list[str] = []
+    for name, learner in (("low", agent.low), ("high", agent.high)):
+        learner.update = lambda batch, name=name: calls.append(name) or {"critic_loss": 0.0}  # type: ignore[method-assign]
+    rng = np.random.default_rng(0)
+    agent.store(labelled_episodes(), rng)
+    agent.train(updates, rng)
+    assert calls.count("low") == updates and calls.count("high") == high_updates
+    # Evenly spread: before the i-th low update at most ceil(i * high / low) high ones ran.
+    highs_before = [calls[:index].count("high") for index, name in enumerate(calls) if name == "low"]
+    assert all(h <= -(-i * high_updates // updates) for i, h in enumerate(highs_before))
+    assert calls[-1] == "high"

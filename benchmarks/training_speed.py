@@ -1,0 +1,80 @@
+"""Training speed: wall time per 1,000 env steps of whole training cycles (collect, store,
+update), for each algorithm, with episodes collected inline or in a process beside the
+learner. Prints the ratios the speed targets are about: dtd against her, and what the
+collecting process gains.
+
+    python benchmarks/training_speed.py --env FetchPush-v4 --cycles 100
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import platform
+import time
+
+import torch
+
+from dtd.config import Algo, Collection, TrainConfig
+from dtd.runs import build, close_all
+
+
+def seconds_per_kilostep(config: TrainConfig, collection: Collection, cycles: int, warmup: int) -> float:
+    """Wall seconds per 1,000 env steps of training cycles, after ``warmup`` cycles."""
+    components = build(config, collection=collection)
+    agent, collector, horizon = components.agent, components.collector, components.spec.horizon
+    try:
+        collector.submit()
+        steps, start = 0, 0.0
+        for cycle in range(warmup + cycles):
+            if cycle == warmup:
+                steps, start = 0, time.perf_counter()
+            episodes = collector.result()
+            agent.store(episodes, components.rng)
+            collector.submit()
+            agent.train(config.updates_per_cycle, components.rng)
+            steps += episodes.count * horizon
+        collector.result()
+        return 1000.0 * (time.perf_counter() - start) / steps
+    finally:
+        close_all(components)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--env", default="FetchPush-v4")
+    parser.add_argument("--algos", default="her,dtd")
+    parser.add_argument("--cycles", type=int, default=100, help="cycles to time")
+    parser.add_argument("--warmup", type=int, default=10, help="cycles before timing (fills the replay)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="a setting")
+    args = parser.parse_args()
+
+    base = TrainConfig(env=args.env)
+    for setting in args.set:
+        name, _, value = setting.partition("=")
+        kind = type(getattr(base, name))
+        base = dataclasses.replace(base, **{name: kind(value)})
+    print(f"# {args.env}, {args.cycles} cycles of {base.episodes_per_cycle} episodes + "
+          f"{base.updates_per_cycle} updates, {base.threads} torch thread(s), {os.cpu_count()} cores, "
+          f"{platform.machine()}, torch {torch.__version__}")  # fmt: skip
+    print(f"{'algo':<6} {'collector':<10} {'s / 1k steps':>13} {'env steps/s':>12}")
+    results: dict[tuple[str, str], float] = {}
+    for algo in args.algos.split(","):
+        config = dataclasses.replace(base, algo=Algo(algo))
+        for collection in (Collection.inline, Collection.process):
+            per_k = seconds_per_kilostep(config, collection, args.cycles, args.warmup)
+            results[algo, collection.value] = per_k
+            print(f"{algo:<6} {collection.value:<10} {per_k:>13.2f} {1000 / per_k:>12.0f}")
+    for algo in args.algos.split(","):
+        gain = results[algo, "inline"] / results[algo, "process"]
+        print(f"collecting process gain, {algo}: {gain:.2f}x")
+    if ("her", "process") in results and ("dtd", "process") in results:
+        print(f"dtd / her wall per env step: {results['dtd', 'process'] / results['her', 'process']:.2f}x "
+              f"(process), {results['dtd', 'inline'] / results['her', 'inline']:.2f}x (inline)")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
