@@ -4,7 +4,7 @@ the same hyperparameters, task, seed and machine, one after the other in one run
 Both evaluate 10 deterministic episodes every 5,000 env steps (success = ``is_success`` at
 the last step); wall time includes evaluation. Differences the libraries do not let us
 remove: SB3 moves its targets after every update (dtd once per 40, as baselines' HER), and
-has no input normalisation or random actions. Needs ``pip install -e .[bench]``.
+takes no random actions. SB3 normalises inputs with its ``VecNormalize`` wrapper. Needs ``pip install -e .[bench]``.
 
     python benchmarks/peer_sb3.py --env FetchPush-v4 --steps 300000 --run-dir runs/peer
 """
@@ -33,8 +33,14 @@ def sb3_curve(env_id: str, steps: int, seed: int, eval_every: int, test_episodes
     from stable_baselines3 import DDPG, HerReplayBuffer
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.noise import NormalActionNoise
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    env, eval_env = make_env(env_id), make_env(env_id)
+    # Running mean/std normalisation of observations and goals (clip 5), as in dtd; the HER
+    # buffer keeps raw goals and normalises what it samples.
+    env = VecNormalize(
+        DummyVecEnv([lambda: make_env(env_id)]), norm_obs=True, norm_reward=False, clip_obs=5.0, gamma=0.98
+    )
+    eval_env = make_env(env_id)
     eval_env.reset(seed=seed + 10_000)
     curve: Curve = []
     start = time.perf_counter()
@@ -47,7 +53,7 @@ def sb3_curve(env_id: str, steps: int, seed: int, eval_every: int, test_episodes
                     obs, _ = eval_env.reset()
                     done = False
                     while not done:
-                        action, _ = self.model.predict(obs, deterministic=True)
+                        action, _ = self.model.predict(env.normalize_obs(obs), deterministic=True)
                         obs, _, terminated, truncated, info = eval_env.step(action)
                         done = terminated or truncated
                     successes.append(float(info["is_success"]))
