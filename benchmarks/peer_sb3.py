@@ -4,7 +4,8 @@ the same hyperparameters, task, seed and machine, one after the other in one run
 Both evaluate 10 deterministic episodes every 5,000 env steps (success = ``is_success`` at
 the last step); wall time includes evaluation. Differences the libraries do not let us
 remove: SB3 moves its targets after every update (dtd once per 40, as baselines' HER), and
-takes no random actions. SB3 normalises inputs with its ``VecNormalize`` wrapper. Needs ``pip install -e .[bench]``.
+takes no random actions. SB3 normalises inputs with its ``VecNormalize`` wrapper.
+Needs ``pip install -e .[bench]``.
 
     python benchmarks/peer_sb3.py --env FetchPush-v4 --steps 300000 --run-dir runs/peer
 """

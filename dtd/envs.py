@@ -12,6 +12,7 @@ import gymnasium as gym
 import numpy as np
 
 from dtd.errors import EnvError
+from dtd.joint_reads import read_joints_by_index
 
 GOAL_KEYS = ("observation", "achieved_goal", "desired_goal")
 
@@ -55,12 +56,14 @@ def make_env(env_id: str) -> gym.Env:
     register_robotics_envs()
     try:
         with contextlib.redirect_stderr(io.StringIO()):
-            return gym.make(env_id, disable_env_checker=True)
+            env = gym.make(env_id, disable_env_checker=True)
     except ModuleNotFoundError as exc:
         module = env_id.split(":")[0]
         raise EnvError(f"cannot import module {module!r} named in environment id {env_id!r}") from exc
     except gym.error.Error as exc:
         raise EnvError(_unknown_env_message(env_id)) from exc
+    read_joints_by_index(env)
+    return env
 
 
 def _unknown_env_message(env_id: str) -> str:
