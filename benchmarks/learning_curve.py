@@ -15,10 +15,8 @@ import json
 import platform
 from pathlib import Path
 
-import torch
-
 from dtd.config import Algo, TrainConfig
-from dtd.run_dir import RunDir
+from dtd.run_dir import RunDir, read_config
 from dtd.runs import train_for_steps
 
 
@@ -47,7 +45,7 @@ def main() -> None:
     )
     train_for_steps(base, args.steps, args.run_dir)
     run = RunDir(args.run_dir)
-    report(run, [int(m) for m in args.marks.split(",")], base)
+    report(run, [int(m) for m in args.marks.split(",")], read_config(run))
 
 
 def with_settings(config: TrainConfig, settings: list[str]) -> TrainConfig:
@@ -66,28 +64,32 @@ def with_settings(config: TrainConfig, settings: list[str]) -> TrainConfig:
     return TrainConfig.from_dict(data)
 
 
-def report(run: RunDir, marks: list[int], config: TrainConfig) -> None:
-    """Print eval success and wall time at each mark (the first epoch at or past it)."""
+def report(run: RunDir, marks: list[int], config: TrainConfig, window: int = 5) -> None:
+    """Print, at each mark (the first epoch at or past it), eval success, its mean over the last
+    ``window`` epochs (test episodes of one epoch are few, so one epoch's figure is noisy),
+    training success over the same epochs, and wall time."""
     with open(run.metrics) as file:
-        rows = [{k: float(v) for k, v in row.items()} for row in csv.DictReader(file)]
+        rows = [{k: float(v) for k, v in row.items() if v != ""} for row in csv.DictReader(file)]
     print(
         f"# {config.algo.value} on {config.env}, seed {config.seed}, "
-        f"{torch.get_num_threads()} torch thread(s), {platform.processor() or platform.machine()}"
+        f"{config.threads} torch thread(s), {platform.processor() or platform.machine()}"
     )
     subgoals = "eval_subgoal_reached" in rows[0]
     print(
-        f"{'env_steps':>10} {'eval_success':>12} {'best_so_far':>11} {'wall_s':>8}"
-        + (f" {'subgoal_reached':>15}" if subgoals else "")
+        f"{'env_steps':>10} {'eval_success':>12} {f'eval_last{window}':>10} {f'train_last{window}':>11} "
+        f"{'wall_s':>8}" + (f" {'subgoal_reached':>15}" if subgoals else "")
     )
     for mark in marks:
-        reached = [row for row in rows if row["env_steps"] >= mark]
-        if not reached:
+        index = next((i for i, row in enumerate(rows) if row["env_steps"] >= mark), None)
+        if index is None:
             print(f"{mark:>10} {'not reached':>12}")
             continue
-        row = reached[0]
-        best = max(r["eval_success"] for r in rows if r["env_steps"] <= row["env_steps"])
+        row, recent = rows[index], rows[max(0, index + 1 - window) : index + 1]
+        eval_mean = sum(r["eval_success"] for r in recent) / len(recent)
+        train_mean = sum(r["train_success"] for r in recent) / len(recent)
+        figures = f"{row['eval_success']:>12.3f} {eval_mean:>10.3f} {train_mean:>11.3f} {row['wall_s']:>8.0f}"
         print(
-            f"{int(row['env_steps']):>10} {row['eval_success']:>12.3f} {best:>11.3f} {row['wall_s']:>8.0f}"
+            f"{int(row['env_steps']):>10} {figures}"
             + (f" {row['eval_subgoal_reached']:>15.3f}" if subgoals else "")
         )
 

@@ -291,8 +291,17 @@ def train_for_steps(config: TrainConfig, steps: int, run_dir: Path) -> TrainStat
     config = dataclasses.replace(config, epochs=math.ceil(steps / per_epoch))
     run = RunDir(Path(run_dir))
     if run.config.exists():
+        if _epochs_recorded(run) >= config.epochs:
+            return TrainState(epoch=_epochs_recorded(run))  # nothing left to train
         return train(config, resume=run.root, show_progress=False)
     return train(config, run_dir=run.root, show_progress=False)
+
+
+def _epochs_recorded(run: RunDir) -> int:
+    if not run.metrics.exists():
+        return 0
+    with open(run.metrics) as file:
+        return max(0, sum(1 for line in file if line.strip()) - 1)
 
 
 def env_spec_of(config: TrainConfig) -> EnvSpec:
