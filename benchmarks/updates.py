@@ -49,36 +49,54 @@ def main() -> None:
     )
     parser.add_argument("--updates", type=int, default=300)
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--compile", action="store_true", help="also time torch.compile'd networks")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
 
     config = LearnerConfig()
-    learner = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), config, gamma=0.98)
     rng = np.random.default_rng(0)
-    learner.update_normalizers(rng.normal(size=(1000, OBS)), rng.normal(size=(1000, GOAL)))
     batches = [random_batch(rng, config.batch_size) for _ in range(args.updates)]
-
+    learner = fresh_learner(config, rng)
     with FlopCounterMode(display=False) as counter:
         learner.update(batches[0])
     flops = counter.get_total_flops()
+    rates = {"eager": (update_rate(learner, batches), 0.0)}
+    if args.compile:
+        learner = fresh_learner(config, rng)
+        learner.compile()
+        start = time.perf_counter()
+        learner.update(batches[0])
+        learner.update(batches[1])  # the actor's own graph, compiled at its second use
+        compile_s = time.perf_counter() - start
+        rates["compiled"] = (update_rate(learner, batches), compile_s)
 
+    big, layer = matmul_rate(1024), matmul_rate(256)
+    print(f"# DDPG update, {config.hidden_sizes} hidden, batch {config.batch_size}, "
+          f"{args.threads} torch thread(s), {platform.machine()}, torch {torch.__version__}")  # fmt: skip
+    print(f"FLOPs per update (matmuls)        {flops / 1e6:10.1f} M")
+    print(f"float32 matmul 1024^3             {big / 1e9:10.2f} GFLOP/s")
+    print(f"float32 matmul 256^3              {layer / 1e9:10.2f} GFLOP/s")
+    for name, (rate, compile_s) in rates.items():
+        achieved = rate * flops
+        print(f"{name:<9} updates/s {rate:8.1f} ({1000 / rate:.2f} ms), {achieved / 1e9:6.2f} GFLOP/s = "
+              f"{achieved / big:6.1%} of 1024^3, {achieved / layer:6.1%} of 256^3"
+              + (f"; compiling took {compile_s:.1f} s" if compile_s else ""))  # fmt: skip
+
+
+def fresh_learner(config: LearnerConfig, rng: np.random.Generator) -> DDPGLearner:
+    learner = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), config, gamma=0.98)
+    learner.update_normalizers(rng.normal(size=(1000, OBS)), rng.normal(size=(1000, GOAL)))
+    return learner
+
+
+def update_rate(learner: DDPGLearner, batches: list[Batch]) -> float:
+    """Updates per second over ``batches``, after 10 warm-up updates."""
     for batch in batches[:10]:
         learner.update(batch)
     start = time.perf_counter()
     for batch in batches:
         learner.update(batch)
-    rate = args.updates / (time.perf_counter() - start)
-
-    big, layer = matmul_rate(1024), matmul_rate(256)
-    print(f"# DDPG update, {config.hidden_sizes} hidden, batch {config.batch_size}, "
-          f"{args.threads} torch thread(s), {platform.machine()}, torch {torch.__version__}")  # fmt: skip
-    print(f"updates/s                         {rate:10.1f}   ({1000 / rate:.2f} ms each)")
-    print(f"FLOPs per update (matmuls)        {flops / 1e6:10.1f} M")
-    print(f"achieved                          {rate * flops / 1e9:10.2f} GFLOP/s")
-    print(f"float32 matmul 1024^3             {big / 1e9:10.2f} GFLOP/s  -> {rate * flops / big:6.1%} of it")
-    print(
-        f"float32 matmul 256^3              {layer / 1e9:10.2f} GFLOP/s  -> {rate * flops / layer:6.1%} of it"
-    )
+    return len(batches) / (time.perf_counter() - start)
 
 
 if __name__ == "__main__":

@@ -49,6 +49,18 @@ class DDPGLearner:
         self.actor_optim = torch.optim.Adam(self.actor.parameters(), lr=config.actor_lr, fused=True)
         self.critic_optim = torch.optim.Adam(self.critic.parameters(), lr=config.critic_lr, fused=True)
         self._actor_params = list(self.actor.parameters())
+        # What update() runs: the networks themselves, or compiled views of them (compile()).
+        self._train_nets: dict[str, nn.Module] = {
+            "actor": self.actor,
+            "critic": self.critic,
+            "actor_target": self.actor_target,
+            "critic_target": self.critic_target,
+        }
+
+    def compile(self) -> None:
+        """Make :meth:`update` run ``torch.compile``d networks (same parameters; acting stays
+        eager). The first updates then take about a minute to compile, once per process."""
+        self._train_nets = {name: torch.compile(net) for name, net in self._train_nets.items()}
 
     def inputs(self, obs: np.ndarray | torch.Tensor, goal: np.ndarray | torch.Tensor) -> torch.Tensor:
         """Clipped, normalised o || g as the networks see it."""
@@ -94,26 +106,27 @@ class DDPGLearner:
         action = torch.as_tensor(batch.action, dtype=torch.float32)
         reward = torch.as_tensor(batch.reward, dtype=torch.float32)
 
+        nets = self._train_nets
         with torch.no_grad():
-            next_action = self._policy(self.actor_target, next_inputs, next_obs)[0]
+            next_action = self._policy(nets["actor_target"], next_inputs, next_obs)[0]
             if batch.next_action is not None and batch.next_action_given is not None:
                 given = torch.as_tensor(batch.next_action_given)[:, None]
                 next_action = torch.where(
                     given, torch.as_tensor(batch.next_action, dtype=torch.float32), next_action
                 )
-            next_q = self._q(self.critic_target, next_inputs, next_action)
+            next_q = self._q(nets["critic_target"], next_inputs, next_action)
             # Episodes end only by the time limit, so every transition bootstraps.
             target = torch.clamp(reward + self.gamma * next_q, *self.return_bounds)
-        q = self._q(self.critic, inputs, action)
+        q = self._q(nets["critic"], inputs, action)
         critic_loss = torch.mean(torch.square(q - target))
         self.critic_optim.zero_grad(set_to_none=True)
         critic_loss.backward()
         self.critic_optim.step()
 
-        policy_action, unit = self._policy(self.actor, inputs, obs)
+        policy_action, unit = self._policy(nets["actor"], inputs, obs)
         action_penalty = torch.mean(torch.square(unit))
         actor_loss = (
-            -self._q(self.critic, inputs, policy_action).mean() + self.config.action_l2 * action_penalty
+            -self._q(nets["critic"], inputs, policy_action).mean() + self.config.action_l2 * action_penalty
         )
         # Gradients for the actor's parameters only: the critic's weight gradients, which a
         # plain backward() would also compute here, are never used.
