@@ -15,6 +15,7 @@ import platform
 import time
 
 import torch
+from learning_curve import with_settings
 
 from dtd.config import Algo, Collection, TrainConfig
 from dtd.runs import build, close_all
@@ -49,14 +50,16 @@ def main() -> None:
     parser.add_argument("--algos", default="her,dtd")
     parser.add_argument("--cycles", type=int, default=100, help="cycles to time")
     parser.add_argument("--warmup", type=int, default=10, help="cycles before timing (fills the replay)")
-    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="a setting")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="any setting, as for learning_curve.py",
+    )
     args = parser.parse_args()
 
-    base = TrainConfig(env=args.env)
-    for setting in args.set:
-        name, _, value = setting.partition("=")
-        kind = type(getattr(base, name))
-        base = dataclasses.replace(base, **{name: kind(value)})
+    base = with_settings(TrainConfig(env=args.env), args.set)
     print(f"# {args.env}, {args.cycles} cycles of {base.episodes_per_cycle} episodes + "
           f"{base.updates_per_cycle} updates, {base.threads} torch thread(s), {os.cpu_count()} cores, "
           f"{platform.machine()}, torch {torch.__version__}")  # fmt: skip
