@@ -1,8 +1,10 @@
-"""Collection speed: env steps/s while collecting episodes with the agent, against the raw
-physics rate of the same task on the same machine, measured in the same run.
+"""Collection speed: env steps/s while collecting exploring episodes with the agent, against
+the raw physics rate of the very same steps, measured in the same run.
 
-The raw rate is ``mujoco.mj_step`` for the environment's substeps per env step, with no
-Python around it but the loop: the most any collector in one process can reach.
+The raw rate counts only the time spent inside ``mujoco.mj_step`` (the environment's
+substeps of each env step, in the states the episodes actually visit): the most any
+collector on one core could reach. Their ratio is what the Python around the physics
+(environment, policy, noise, bookkeeping) leaves of it.
 
     python benchmarks/collection.py --env FetchPush-v4 --episodes 40
 """
@@ -12,6 +14,8 @@ from __future__ import annotations
 import argparse
 import platform
 import time
+from types import ModuleType
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -21,30 +25,49 @@ from dtd.config import Algo, Collection, TrainConfig
 from dtd.runs import build, close_all
 
 
-def raw_physics_rate(env, steps: int) -> float:
-    """Env steps per second of bare ``mj_step`` calls (n_substeps each)."""
-    model, data = env.unwrapped.model, env.unwrapped.data
-    substeps = int(env.unwrapped.n_substeps)
-    mujoco.mj_step(model, data, nstep=substeps)  # warm up
-    start = time.perf_counter()
-    for _ in range(steps):
-        mujoco.mj_step(model, data, nstep=substeps)
-    return steps / (time.perf_counter() - start)
+class TimedPhysics:
+    """Stands in for the ``mujoco`` module inside an environment, timing its ``mj_step``."""
+
+    def __init__(self, module: ModuleType) -> None:
+        self._module = module
+        self.seconds = 0.0
+        self.steps = 0
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._module, name)
+
+    def mj_step(self, *args: Any, **kwargs: Any) -> None:
+        start = time.perf_counter()
+        self._module.mj_step(*args, **kwargs)
+        self.seconds += time.perf_counter() - start
+        self.steps += 1
 
 
-def collection_rate(config: TrainConfig, episodes: int) -> tuple[float, int]:
-    """Env steps per second of exploring episodes with a fresh agent, and the steps run."""
+def measure(config: TrainConfig, episodes: int) -> tuple[float, float, int]:
+    """(collection env steps/s, raw physics env steps/s, steps) over exploring episodes of a
+    fresh agent, collected inline."""
     components = build(config, collection=Collection.inline)
     collector = components.collector
+    timers = []
+    for env in collector.envs:
+        if not hasattr(env.unwrapped, "_mujoco"):
+            raise SystemExit(f"{config.env} is not a Gymnasium-Robotics MuJoCo environment")
+        timers.append(TimedPhysics(env.unwrapped._mujoco))
+        env.unwrapped._mujoco = timers[-1]
     try:
         collector.submit()
         collector.result()  # warm up
+        for timer in timers:
+            timer.seconds, timer.steps = 0.0, 0
         steps = 0
         start = time.perf_counter()
         while steps < episodes * components.spec.horizon:
             collector.submit()
             steps += collector.result().count * components.spec.horizon
-        return steps / (time.perf_counter() - start), steps
+        elapsed = time.perf_counter() - start
+        physics_steps = sum(timer.steps for timer in timers)
+        physics_rate = physics_steps / sum(timer.seconds for timer in timers)
+        return steps / elapsed, physics_rate, steps
     finally:
         close_all(components)
 
@@ -60,10 +83,7 @@ def main() -> None:
     args = parser.parse_args()
 
     config = TrainConfig(env=args.env, algo=Algo(args.algo), episodes_per_cycle=args.envs)
-    components = build(config, collection=Collection.inline)
-    raw = raw_physics_rate(components.eval_envs[0], steps=args.episodes * components.spec.horizon)
-    close_all(components)
-    rate, steps = collection_rate(config, args.episodes)
+    rate, raw, steps = measure(config, args.episodes)
     threads = torch.get_num_threads()
     print(f"# {args.algo} on {args.env}, {args.envs} env(s) in one process, {threads} torch thread(s), "
           f"{platform.machine()}, numpy {np.__version__}, mujoco {mujoco.__version__}")  # fmt: skip
