@@ -143,7 +143,14 @@ def resolved_collection(collection: Collection) -> Collection:
     """``auto`` made concrete: a collecting process when this process may use two cores."""
     if collection is not Collection.auto:
         return collection
-    return Collection.process if len(os.sched_getaffinity(0)) >= 2 else Collection.inline
+    return Collection.process if usable_cores() >= 2 else Collection.inline
+
+
+def usable_cores() -> int:
+    """Cores this process may run on (all of the machine's where that cannot be asked)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 def seeded_envs(env_id: str, count: int, seeds: np.random.SeedSequence) -> tuple[list[gym.Env], EnvSpec]:
