@@ -298,8 +298,9 @@ def train_for_steps(config: TrainConfig, steps: int, run_dir: Path) -> TrainStat
     config = dataclasses.replace(config, epochs=math.ceil(steps / per_epoch))
     run = RunDir(Path(run_dir))
     if run.config.exists():
-        if _epochs_recorded(run) >= config.epochs:
-            return TrainState(epoch=_epochs_recorded(run))  # nothing left to train
+        recorded = _epochs_recorded(run)
+        if recorded >= config.epochs:
+            return TrainState(epoch=recorded)  # nothing left to train
         return train(config, resume=run.root, show_progress=False)
     return train(config, run_dir=run.root, show_progress=False)
 
