@@ -149,20 +149,6 @@ class DDPGLearner:
         for target, online in ((self.actor_target, self.actor), (self.critic_target, self.critic)):
             torch._foreach_lerp_(list(target.parameters()), list(online.parameters()), weight)
 
-    def state_dict(self) -> dict[str, Any]:
-        """Plain data: network, optimiser and normaliser states."""
-        return {
-            "head": self.head.state_dict(),
-            "actor": self.actor.state_dict(),
-            "critic": self.critic.state_dict(),
-            "actor_target": self.actor_target.state_dict(),
-            "critic_target": self.critic_target.state_dict(),
-            "actor_optim": self.actor_optim.state_dict(),
-            "critic_optim": self.critic_optim.state_dict(),
-            "obs_norm": self.obs_norm.state_dict(),
-            "goal_norm": self.goal_norm.state_dict(),
-        }
-
     def acting_state(self) -> dict[str, Any]:
         """What :meth:`act` needs (head, actor, normalisers), for a copy that only acts."""
         return {
@@ -179,17 +165,25 @@ class DDPGLearner:
         self.obs_norm.load_state_dict(state["obs_norm"])
         self.goal_norm.load_state_dict(state["goal_norm"])
 
+    def state_dict(self) -> dict[str, Any]:
+        """Plain data: the acting state plus critic, target networks and optimisers."""
+        return {
+            **self.acting_state(),
+            "critic": self.critic.state_dict(),
+            "actor_target": self.actor_target.state_dict(),
+            "critic_target": self.critic_target.state_dict(),
+            "actor_optim": self.actor_optim.state_dict(),
+            "critic_optim": self.critic_optim.state_dict(),
+        }
+
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore what :meth:`state_dict` returned."""
-        self.head.load_state_dict(state["head"])
-        self.actor.load_state_dict(state["actor"])
+        self.load_acting_state(state)
         self.critic.load_state_dict(state["critic"])
         self.actor_target.load_state_dict(state["actor_target"])
         self.critic_target.load_state_dict(state["critic_target"])
         self.actor_optim.load_state_dict(state["actor_optim"])
         self.critic_optim.load_state_dict(state["critic_optim"])
-        self.obs_norm.load_state_dict(state["obs_norm"])
-        self.goal_norm.load_state_dict(state["goal_norm"])
 
 
 def _frozen_copy(module: nn.Module) -> nn.Module:
