@@ -4,7 +4,10 @@ the raw physics rate of the very same steps, measured in the same run.
 The raw rate counts only the time spent inside ``mujoco.mj_step`` (the environment's
 substeps of each env step, in the states the episodes actually visit): the most any
 collector on one core could reach. Their ratio is what the Python around the physics
-(environment, policy, noise, bookkeeping) leaves of it.
+(environment, policy, noise, bookkeeping) leaves of it. A third figure, the environment
+stepped alone with random actions, shows how much of that is the environment's own
+``step`` (Gymnasium-Robotics' action, callback and observation code), which no collector
+can avoid.
 
     python benchmarks/collection.py --env FetchPush-v4 --episodes 40
 """
@@ -22,6 +25,7 @@ import numpy as np
 import torch
 
 from dtd.config import Algo, Collection, TrainConfig
+from dtd.envs import make_env
 from dtd.runs import build, close_all
 
 
@@ -43,9 +47,9 @@ class TimedPhysics:
         self.steps += 1
 
 
-def measure(config: TrainConfig, episodes: int) -> tuple[float, float, int]:
-    """(collection env steps/s, raw physics env steps/s, steps) over exploring episodes of a
-    fresh agent, collected inline."""
+def measure(config: TrainConfig, episodes: int) -> tuple[float, float, int, int]:
+    """(collection env steps/s, raw physics env steps/s, steps, horizon) over exploring
+    episodes of a fresh agent, collected inline."""
     components = build(config, collection=Collection.inline)
     collector = components.collector
     timers = []
@@ -67,9 +71,29 @@ def measure(config: TrainConfig, episodes: int) -> tuple[float, float, int]:
         elapsed = time.perf_counter() - start
         physics_steps = sum(timer.steps for timer in timers)
         physics_rate = physics_steps / sum(timer.seconds for timer in timers)
-        return steps / elapsed, physics_rate, steps
+        return steps / elapsed, physics_rate, steps, components.spec.horizon
     finally:
         close_all(components)
+
+
+def environment_alone(env_id: str, steps: int, horizon: int) -> tuple[float, float]:
+    """(env steps/s, raw physics env steps/s) of one environment stepped with uniformly random
+    actions drawn beforehand: the environment's ``step`` and nothing else."""
+    env = make_env(env_id)
+    timer = TimedPhysics(env.unwrapped._mujoco)
+    env.unwrapped._mujoco = timer
+    env.reset(seed=0)
+    actions = np.random.default_rng(0).uniform(-1.0, 1.0, (steps, *env.action_space.shape))
+    actions = actions.astype(env.action_space.dtype)
+    timer.seconds, timer.steps = 0.0, 0
+    start = time.perf_counter()
+    for t in range(steps):
+        if t % horizon == 0:
+            env.reset()
+        env.step(actions[t])
+    elapsed = time.perf_counter() - start
+    env.close()
+    return steps / elapsed, timer.steps / timer.seconds
 
 
 def main() -> None:
@@ -83,7 +107,8 @@ def main() -> None:
     args = parser.parse_args()
 
     config = TrainConfig(env=args.env, algo=Algo(args.algo), episodes_per_cycle=args.envs)
-    rate, raw, steps = measure(config, args.episodes)
+    rate, raw, steps, horizon = measure(config, args.episodes)
+    alone, alone_raw = environment_alone(args.env, steps, horizon)
     threads = torch.get_num_threads()
     print(f"# {args.algo} on {args.env}, {args.envs} env(s) in one process, {threads} torch thread(s), "
           f"{platform.machine()}, numpy {np.__version__}, mujoco {mujoco.__version__}")  # fmt: skip
@@ -91,6 +116,8 @@ def main() -> None:
     print(f"{'raw physics (mj_step)':<28} {raw:>12.0f}")
     print(f"{'collection with the agent':<28} {rate:>12.0f}   ({steps} steps)")
     print(f"{'ratio':<28} {rate / raw:>12.2f}")
+    print(f"{'environment alone':<28} {alone:>12.0f}   (random actions; its own mj_step rate "
+          f"{alone_raw:.0f}, ratio {alone / alone_raw:.2f})")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -3,8 +3,9 @@ the same hyperparameters, task, seed and machine, one after the other in one run
 
 Both evaluate 10 deterministic episodes every 5,000 env steps (success = ``is_success`` at
 the last step); wall time includes evaluation. Differences the libraries do not let us
-remove: SB3 moves its targets after every update (dtd once per 40, as baselines' HER), and
-takes no random actions. SB3 normalises inputs with its ``VecNormalize`` wrapper.
+remove: SB3 moves its targets after every update (dtd by 0.05 once per 40, as baselines'
+HER), so SB3 gets the per-update rate that moves them as far over 40 updates,
+1 - 0.95 ** (1 / 40); and it takes no random actions. SB3 normalises inputs with its ``VecNormalize`` wrapper.
 Needs ``pip install -e .[bench]``.
 
     python benchmarks/peer_sb3.py --env FetchPush-v4 --steps 300000 --run-dir runs/peer
@@ -72,7 +73,7 @@ def sb3_curve(env_id: str, steps: int, seed: int, eval_every: int, test_episodes
         learning_rate=1e-3,
         buffer_size=1_000_000,
         batch_size=256,
-        tau=0.05,
+        tau=1.0 - 0.95 ** (1.0 / 40),  # dtd: 0.05 once per 40 updates
         gamma=0.98,
         train_freq=(2, "episode"),
         gradient_steps=40,
