@@ -11,11 +11,10 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import platform
 from pathlib import Path
 
-from dtd.config import Algo, TrainConfig
+from dtd.config import Algo, TrainConfig, with_settings
 from dtd.run_dir import RunDir, read_config
 from dtd.runs import train_for_steps
 
@@ -46,22 +45,6 @@ def main() -> None:
     train_for_steps(base, args.steps, args.run_dir)
     run = RunDir(args.run_dir)
     report(run, [int(m) for m in args.marks.split(",")], read_config(run))
-
-
-def with_settings(config: TrainConfig, settings: list[str]) -> TrainConfig:
-    """``config`` with NAME=VALUE settings applied (``learner.`` and ``high.`` for the learners)."""
-    data = config.to_dict()
-    for setting in settings:
-        name, _, value = setting.partition("=")
-        *parents, leaf = name.split(".")
-        target = data
-        for parent in parents:
-            target = target[parent]
-        try:
-            target[leaf] = json.loads(value)
-        except json.JSONDecodeError:
-            target[leaf] = value
-    return TrainConfig.from_dict(data)
 
 
 def report(run: RunDir, marks: list[int], config: TrainConfig, window: int = 5) -> None:

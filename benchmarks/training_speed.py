@@ -15,9 +15,8 @@ import platform
 import time
 
 import torch
-from learning_curve import with_settings
 
-from dtd.config import Algo, Collection, TrainConfig
+from dtd.config import Algo, Collection, TrainConfig, with_settings
 from dtd.runs import build, close_all
 
 

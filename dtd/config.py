@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import json
 import math
 from typing import Any
 
@@ -272,6 +273,29 @@ def flat_items(config: TrainConfig) -> dict[str, Any]:
     flat.update(flat.pop("learner"))
     flat.update({f"high.{name}": value for name, value in flat.pop("high").items()})
     return flat
+
+
+def with_settings(config: TrainConfig, settings: list[str]) -> TrainConfig:
+    """``config`` with ``NAME=VALUE`` settings applied: NAME is a field of TrainConfig (a
+    learner's as ``learner.<name>`` or ``high.<name>``), VALUE is JSON, or else a string."""
+    data = config.to_dict()
+    for setting in settings:
+        name, equals, value = setting.partition("=")
+        if not equals or not name:
+            raise ConfigError(f"a setting is NAME=VALUE, got {setting!r}")
+        *parents, leaf = name.replace("-", "_").split(".")
+        target = data
+        for parent in parents:
+            if not isinstance(target.get(parent), dict):
+                raise ConfigError(f"unknown setting {name!r}")
+            target = target[parent]
+        if leaf not in target:
+            raise ConfigError(f"unknown setting {name!r}")
+        try:
+            target[leaf] = json.loads(value)
+        except json.JSONDecodeError:
+            target[leaf] = value
+    return TrainConfig.from_dict(data)
 
 
 def _plain(value: Any) -> Any:

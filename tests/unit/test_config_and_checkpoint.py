@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from dtd.checkpoint import FORMAT_VERSION, load_checkpoint, save_atomic
-from dtd.config import Algo, LearnerConfig, TrainConfig
+from dtd.config import Algo, LearnerConfig, TrainConfig, with_settings
 from dtd.errors import CheckpointError, ConfigError
 from dtd.runs import resumed_config
 
@@ -47,6 +47,18 @@ def test_dict_round_trip():
     assert TrainConfig.from_dict(config.to_dict()) == config
     with pytest.raises(ConfigError, match="typo"):
         TrainConfig.from_dict({**config.to_dict(), "typo": 1})
+
+
+def test_settings_by_name_reach_both_learners_and_unknown_names_are_refused():
+    changed = with_settings(
+        VALID, ["updates_per_cycle=80", "learner.batch_size=512", "high.polyak=0.9", "collector=inline"]
+    )
+    assert changed.updates_per_cycle == 80 and changed.learner.batch_size == 512
+    assert changed.high.polyak == 0.9 and changed.learner.polyak == VALID.learner.polyak
+    assert changed.collector.value == "inline" and changed.env == VALID.env
+    for bad in ("nope=1", "learner.nope=1", "updates_per_cycle", "epochs.x=1"):
+        with pytest.raises(ConfigError):
+            with_settings(VALID, [bad])
 
 
 def test_resume_takes_the_stored_settings_and_allows_more_epochs():

@@ -1,0 +1,68 @@
+"""Learning curves read back from runs' ``metrics.csv``, and the figures taken from them."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+from dtd.errors import RunDirError
+from dtd.run_dir import RunDir
+
+SMOOTHING = 3
+"""Epochs whose eval success is averaged when a curve is asked when it first reached a level:
+one epoch's 10 evaluation episodes reach 0.5 by chance long before the policy does."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Curve:
+    """One run's per-epoch figures, in epoch order."""
+
+    epoch: np.ndarray
+    env_steps: np.ndarray
+    wall_s: np.ndarray
+    eval_success: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.epoch)
+
+    @property
+    def final_success(self) -> float:
+        return float(self.eval_success[-1]) if len(self) else float("nan")
+
+    def smoothed(self, window: int = SMOOTHING) -> np.ndarray:
+        """Eval success averaged over each epoch and the ``window - 1`` before it (fewer at
+        the start)."""
+        if window < 1:
+            raise ValueError(f"window must be at least 1, got {window}")
+        sums = np.cumsum(np.concatenate([[0.0], self.eval_success]))
+        ends = np.arange(1, len(self) + 1)
+        starts = np.maximum(ends - window, 0)
+        return (sums[ends] - sums[starts]) / (ends - starts)
+
+    def first_reaching(self, level: float, window: int = SMOOTHING) -> tuple[int, float] | None:
+        """(env steps, wall seconds) at the first epoch whose smoothed eval success is at
+        least ``level``; None if it never is."""
+        reached = np.flatnonzero(self.smoothed(window) >= level)
+        if len(reached) == 0:
+            return None
+        first = reached[0]
+        return int(self.env_steps[first]), float(self.wall_s[first])
+
+
+def read_curve(run_dir: Path) -> Curve:
+    """The curve of the run in ``run_dir`` (empty if it has not finished an epoch)."""
+    run = RunDir(Path(run_dir))
+    if not run.metrics.exists():
+        if not run.config.exists():
+            raise RunDirError(f"{run.root} holds no run (no config.json)")
+        return Curve(*(np.zeros(0) for _ in range(4)))
+    with open(run.metrics, newline="") as file:
+        rows = list(csv.DictReader(file))
+    columns = ("epoch", "env_steps", "wall_s", "eval_success")
+    try:
+        return Curve(*(np.array([float(row[name]) for row in rows]) for name in columns))
+    except (KeyError, ValueError) as exc:
+        raise RunDirError(f"{run.metrics} is not a dtd metrics file: {exc}") from exc
