@@ -28,7 +28,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--steps", type=int, default=300_000, help="env steps to train for")
     parser.add_argument("--marks", default="50000,100000,200000,300000", help="env steps to report at")
-    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--threads", type=int, default=0, help="torch threads (0: automatic)")
     parser.add_argument("--run-dir", type=Path, required=True)
     parser.add_argument(
         "--set",

@@ -24,7 +24,7 @@ import torch
 
 from dtd.config import Algo, TrainConfig
 from dtd.envs import make_env
-from dtd.run_dir import RunDir
+from dtd.run_dir import RunDir, read_config
 from dtd.runs import train_for_steps
 
 Curve = list[tuple[int, float, float]]  # (env steps, eval success, wall seconds)
@@ -113,12 +113,15 @@ def main() -> None:
     parser.add_argument("--run-dir", type=Path, required=True, help="where dtd's run goes")
     parser.add_argument("--skip-sb3", action="store_true", help="only dtd (e.g. SB3 measured before)")
     args = parser.parse_args()
-    torch.set_num_threads(1)
-
+    # Each library with the torch threads it would use on this machine by default.
+    default_threads = torch.get_num_threads()
     curves = {"dtd her": dtd_curve(args.env, args.steps, args.seed, args.run_dir)}
     if not args.skip_sb3:
+        torch.set_num_threads(default_threads)
         curves["sb3 ddpg+her"] = sb3_curve(args.env, args.steps, args.seed, eval_every=5000, test_episodes=10)
-    print(f"# {args.env}, seed {args.seed}, {args.steps} env steps, 1 torch thread, {platform.machine()}")
+    dtd_threads = read_config(RunDir(args.run_dir)).threads
+    print(f"# {args.env}, seed {args.seed}, {args.steps} env steps, {platform.machine()}, "
+          f"torch threads: dtd {dtd_threads}, sb3 {default_threads}")  # fmt: skip
     header = f"{'library':<14} {'to 0.5 success':>22} {'to 0.9 success':>22}"
     print(f"{header} {'final':>6} {'wall':>7} {'steps/s':>8}")
     for name, curve in curves.items():

@@ -47,9 +47,13 @@ def main() -> None:
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
     workers = args.workers or max(1, min(args.seeds, cores))
     base = with_settings(TrainConfig(env=args.env, algo=Algo(args.algo)), args.set)
-    if workers > 1 and base.collector is Collection.auto:
-        # Each run keeps to its own core; a collecting process per run would fight for them.
-        base = with_settings(base, ["collector=inline"])
+    if workers > 1:
+        # The runs share the cores: each keeps to its share, without a collecting process.
+        share = max(1, cores // workers)
+        if base.threads == 0:
+            base = with_settings(base, [f"threads={share}"])
+        if base.collector is Collection.auto:
+            base = with_settings(base, ["collector=inline"])
     trials = [
         Trial(with_settings(base, [f"seed={seed}"]), args.steps, args.out / f"{args.algo}-s{seed}")
         for seed in range(args.seeds)

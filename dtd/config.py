@@ -44,7 +44,8 @@ class Collection(enum.Enum):
     with the policy from before them; only the wall time differs."""
 
     auto = "auto"
-    """``process`` on a machine with at least two cores, else ``inline``."""
+    """``process`` where at least three cores are free for the run, else ``inline`` (on two
+    cores the learner gains more from a second torch thread than from a collecting process)."""
     inline = "inline"
     """In the learner's process, between its updates."""
     process = "process"
@@ -113,8 +114,10 @@ class TrainConfig:
     """Exploration: std of Gaussian action noise, as a fraction of the largest action."""
     random_eps: float = 0.3
     """Exploration: probability of taking a uniformly random action instead."""
-    threads: int = 1
-    """Torch threads for the learner; 1 makes runs reproducible bit for bit."""
+    threads: int = 0
+    """Torch threads for the learner; 0: chosen for this machine (``dtd.runs.resolved_threads``)
+    and recorded in the run's config.json. Runs with the same thread count are the same bit
+    for bit."""
     collector: Collection = Collection.auto
     """Where training episodes are collected (a matter of speed only; the run is the same)."""
     learner: tyro.conf.OmitArgPrefixes[LearnerConfig] = LearnerConfig()
@@ -172,7 +175,7 @@ class TrainConfig:
                 _finite_in(self.random_eps, 0, 1),
                 f"--random-eps must lie in [0, 1], got {self.random_eps}",
             ),
-            (self.threads >= 1, f"--threads must be at least 1, got {self.threads}"),
+            (self.threads >= 0, f"--threads must be 0 (automatic) or more, got {self.threads}"),
             (self.seed >= 0, f"--seed must be 0 or more, got {self.seed}"),
             (self.segments >= 2, f"--segments must be at least 2, got {self.segments}"),
             (
