@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import sys
 from pathlib import Path
@@ -9,7 +10,7 @@ from typing import Annotated
 
 import tyro
 
-from dtd.config import TrainConfig
+from dtd.config import Preset, TrainConfig, preset_config
 from dtd.errors import DtdError
 
 
@@ -24,6 +25,7 @@ def train(
 
     Examples:
       dtd train --env FetchPush-v4 --algo her --seed 0 --epochs 50 --run-dir runs/push-her-0
+      dtd train --env FetchPush-v4 --algo dtd --preset paper   # the paper's settings
       dtd train --resume runs/push-her-0
 
     Args:
@@ -90,14 +92,31 @@ def format_plan(number: int, plan: dict) -> str:
     return "\n".join(lines)
 
 
+def preset_named(argv: list[str]) -> Preset:
+    """The ``--preset`` given in ``argv`` (the last one), else ``tuned``; a name that is not a
+    preset is left for the parser to report."""
+    preset = Preset.tuned
+    for index, arg in enumerate(argv):
+        name, _, value = arg.partition("=")
+        if name != "--preset":
+            continue
+        value = value or (argv[index + 1] if index + 1 < len(argv) else "")
+        if value in Preset.__members__:
+            preset = Preset(value)
+    return preset
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``dtd`` command."""
+    args = sys.argv[1:] if argv is None else argv
+    # The preset supplies the defaults the other options override, so it is read first.
+    train_command = functools.partial(train, config=preset_config(preset_named(args)))
     try:
         tyro.extras.subcommand_cli_from_dict(
-            {"train": train, "eval": evaluate},
+            {"train": train_command, "eval": evaluate},
             prog="dtd",
             description="Dot-to-Dot: train and explain goal-conditioned agents (DDPG, HER, DtD).",
-            args=argv,
+            args=args,
         )
     except DtdError as exc:
         print(f"dtd: error: {exc}", file=sys.stderr)

@@ -52,6 +52,15 @@ class Collection(enum.Enum):
     """In a process of its own beside the learner, during the learner's updates."""
 
 
+class Preset(enum.Enum):
+    """The defaults every setting starts from; options given beside it override them."""
+
+    tuned = "tuned"
+    """This library's defaults, measured on one machine (docs/tuning.md)."""
+    paper = "paper"
+    """The reference settings of HER and of the Dot-to-Dot paper, exactly."""
+
+
 @dataclasses.dataclass(frozen=True)
 class LearnerConfig:
     """Settings of one DDPG learner (actor, critic, their targets and input normalisers)."""
@@ -94,6 +103,9 @@ class TrainConfig:
     """Gymnasium id of a goal-conditioned environment, e.g. FetchPush-v4, or module:EnvId."""
     algo: Algo = Algo.her
     """Agent to train."""
+    preset: Preset = Preset.tuned
+    """Defaults of every other setting: ``tuned`` (docs/tuning.md) or ``paper`` (the reference
+    settings, exactly); the options given beside it override them."""
     seed: int = 0
     """Seed of networks, environments, exploration and replay sampling."""
     epochs: int = 50
@@ -228,7 +240,13 @@ class TrainConfig:
             for name, default in (("learner", LearnerConfig()), ("high", HIGH_LEVEL_DEFAULTS))
             if name in data
         }
-        for name, kind in (("algo", Algo), ("low_relabel_window", RelabelWindow), ("collector", Collection)):
+        enums = (
+            ("algo", Algo),
+            ("preset", Preset),
+            ("low_relabel_window", RelabelWindow),
+            ("collector", Collection),
+        )
+        for name, kind in enums:
             if name in data:
                 try:
                     data[name] = kind(data[name])
@@ -276,6 +294,45 @@ def flat_items(config: TrainConfig) -> dict[str, Any]:
     flat.update(flat.pop("learner"))
     flat.update({f"high.{name}": value for name, value in flat.pop("high").items()})
     return flat
+
+
+PAPER_SETTINGS: dict[str, Any] = {
+    "n_cycles": 50,
+    "episodes_per_cycle": 2,
+    "updates_per_cycle": 40,
+    "test_episodes": 10,
+    "buffer_size": 1_000_000,
+    "replay_k": 4,
+    "noise_eps": 0.2,
+    "random_eps": 0.3,
+    "learner.hidden_sizes": [256, 256, 256],
+    "learner.actor_lr": 1e-3,
+    "learner.critic_lr": 1e-3,
+    "learner.batch_size": 256,
+    "learner.polyak": 0.95,
+    "learner.action_l2": 1.0,
+    "learner.gamma": None,
+    "learner.clip_return": True,
+    "learner.norm_clip": 5.0,
+    "learner.obs_clip": 200.0,
+    "learner.norm_eps": 0.01,
+    "segments": 2,
+    # Dot-to-Dot as the paper describes it: near goals for the low level, both levels
+    # updated alike in each training phase.
+    "low_relabel_window": "segment",
+    "high_updates_per_cycle": 40,
+}
+"""The reference settings (HER's, which the paper keeps) by their ``with_settings`` names."""
+
+
+def preset_config(preset: Preset, **settings: Any) -> TrainConfig:
+    """The configuration ``preset`` starts from, with ``settings`` (fields) on top."""
+    config = TrainConfig(preset=preset)
+    if preset is Preset.paper:
+        config = with_settings(
+            config, [f"{name}={json.dumps(value)}" for name, value in PAPER_SETTINGS.items()]
+        )
+    return dataclasses.replace(config, **settings)
 
 
 def with_settings(config: TrainConfig, settings: list[str]) -> TrainConfig:

@@ -17,7 +17,7 @@ from dtd.agent import Agent, GoalConditionedAgent
 from dtd.buffer import EpisodeBuffer
 from dtd.checkpoint import FORMAT_VERSION, load_checkpoint, restoring
 from dtd.collector import Collector, InlineCollector, ProcessCollector
-from dtd.config import Algo, Collection, RelabelWindow, TrainConfig, flat_items
+from dtd.config import Algo, Collection, Preset, RelabelWindow, TrainConfig, flat_items, preset_config
 from dtd.ddpg import DDPGLearner
 from dtd.envs import EnvSpec, make_envs, reward_function
 from dtd.errors import CheckpointError, ConfigError, RunDirError
@@ -214,10 +214,16 @@ def check_checkpoint(snapshot: dict[str, Any], config: TrainConfig, spec: EnvSpe
 def resumed_config(stored: TrainConfig, given: TrainConfig) -> TrainConfig:
     """The stored configuration, with the settings the user changed on the command line.
 
-    A setting counts as given when it differs from the default; only RESUMABLE_SETTINGS
-    may differ from the stored run.
+    A setting counts as given when it differs from the default of the preset given; only
+    RESUMABLE_SETTINGS may differ from the stored run.
     """
-    defaults, stored_flat, given_flat = flat_items(TrainConfig()), flat_items(stored), flat_items(given)
+    if given.preset is not Preset.tuned and given.preset is not stored.preset:
+        raise ConfigError(
+            f"--preset cannot change when resuming (the run has {stored.preset.value!r}); "
+            f"only {_RESUMABLE_FLAGS} can"
+        )
+    defaults = flat_items(preset_config(given.preset))
+    stored_flat, given_flat = flat_items(stored), flat_items(given)
     changes: dict[str, Any] = {}
     for name, value in given_flat.items():
         if value == defaults[name] or value == stored_flat[name]:

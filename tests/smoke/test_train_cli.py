@@ -129,3 +129,14 @@ def test_train_for_steps_resumes_up_to_a_larger_budget(tmp_path):
     state = train_for_steps(config, 450, tmp_path / "run")  # 2.25 epochs of 200 steps: 3 epochs
     assert state.env_steps == 600
     assert [int(r["epoch"]) for r in read_metrics(tmp_path / "run")] == [1, 2, 3]
+
+
+def test_the_paper_preset_gives_the_defaults_and_options_beside_it_win(tmp_path):
+    run_dir = tmp_path / "paper"
+    result = dtd("train", "--env", "FetchReach-v4", "--algo", "dtd", "--preset", "paper", "--epochs", "1",
+                 "--low-relabel-window", "episode", *TINY, "--run-dir", run_dir)  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    config = json.loads((run_dir / "config.json").read_text())["config"]
+    assert config["preset"] == "paper" and config["low_relabel_window"] == "episode"
+    assert config["high_updates_per_cycle"] == 40 and config["updates_per_cycle"] == 5
+    assert config["threads"] >= 1  # the thread count chosen is recorded

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from dtd.checkpoint import FORMAT_VERSION, load_checkpoint, save_atomic
-from dtd.config import Algo, LearnerConfig, TrainConfig, with_settings
+from dtd.config import Algo, LearnerConfig, Preset, RelabelWindow, TrainConfig, preset_config, with_settings
 from dtd.errors import CheckpointError, ConfigError
 from dtd.runs import resumed_config
 
@@ -85,3 +85,28 @@ def test_checkpoint_round_trip_and_errors(tmp_path):
     torch.save({"format_version": 99}, path)
     with pytest.raises(CheckpointError, match="format version 99"):
         load_checkpoint(path)
+
+
+def test_paper_preset_is_the_reference_and_options_override_it():
+    paper = preset_config(Preset.paper, env="FetchPush-v4", seed=3)
+    assert (paper.preset, paper.env, paper.seed) == (Preset.paper, "FetchPush-v4", 3)
+    assert (paper.n_cycles, paper.episodes_per_cycle, paper.updates_per_cycle) == (50, 2, 40)
+    assert (paper.replay_k, paper.noise_eps, paper.random_eps, paper.buffer_size) == (4, 0.2, 0.3, 1_000_000)
+    learner = paper.learner
+    assert learner.hidden_sizes == (256, 256, 256) and learner.batch_size == 256
+    assert (learner.actor_lr, learner.critic_lr, learner.polyak, learner.action_l2) == (1e-3, 1e-3, 0.95, 1.0)
+    assert learner.gamma is None and learner.clip_return
+    assert paper.low_relabel_window is RelabelWindow.segment and paper.high_updates_per_cycle == 40
+    assert TrainConfig.from_dict(paper.to_dict()) == paper
+    assert preset_config(Preset.tuned) == TrainConfig()
+
+
+def test_resuming_keeps_the_runs_preset():
+    paper = preset_config(Preset.paper, env="FetchReach-v4")
+    # `dtd train --resume RUN --epochs 80`: given = the tuned defaults with more epochs
+    resumed = resumed_config(paper, dataclasses.replace(TrainConfig(), epochs=80))
+    assert resumed == dataclasses.replace(paper, epochs=80)
+    # `--resume RUN --preset paper --epochs 80` says the same
+    assert resumed_config(paper, preset_config(Preset.paper, epochs=80)) == resumed
+    with pytest.raises(ConfigError, match="--preset"):
+        resumed_config(TrainConfig(env="FetchReach-v4"), preset_config(Preset.paper))
