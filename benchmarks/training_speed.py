@@ -20,9 +20,13 @@ from dtd.config import Algo, Collection, TrainConfig, with_settings
 from dtd.runs import build, close_all
 
 
-def seconds_per_kilostep(config: TrainConfig, collection: Collection, cycles: int, warmup: int) -> float:
-    """Wall seconds per 1,000 env steps of training cycles, after ``warmup`` cycles."""
+def seconds_per_kilostep(
+    config: TrainConfig, collection: Collection, cycles: int, warmup: int
+) -> tuple[float, int]:
+    """Wall seconds per 1,000 env steps of training cycles, after ``warmup`` cycles, and the
+    learner's torch threads."""
     components = build(config, collection=collection)
+    threads = torch.get_num_threads()
     agent, collector, horizon = components.agent, components.collector, components.spec.horizon
     try:
         collector.submit()
@@ -36,7 +40,7 @@ def seconds_per_kilostep(config: TrainConfig, collection: Collection, cycles: in
             agent.train(config.updates_per_cycle, components.rng)
             steps += episodes.count * horizon
         collector.result()
-        return 1000.0 * (time.perf_counter() - start) / steps
+        return 1000.0 * (time.perf_counter() - start) / steps, threads
     finally:
         close_all(components)
 
@@ -60,16 +64,16 @@ def main() -> None:
 
     base = with_settings(TrainConfig(env=args.env), args.set)
     print(f"# {args.env}, {args.cycles} cycles of {base.episodes_per_cycle} episodes + "
-          f"{base.updates_per_cycle} updates, {base.threads} torch thread(s), {os.cpu_count()} cores, "
+          f"{base.updates_per_cycle} updates, {os.cpu_count()} cores, "
           f"{platform.machine()}, torch {torch.__version__}")  # fmt: skip
-    print(f"{'algo':<6} {'collector':<10} {'s / 1k steps':>13} {'env steps/s':>12}")
+    print(f"{'algo':<6} {'collector':<10} {'threads':>7} {'s / 1k steps':>13} {'env steps/s':>12}")
     results: dict[tuple[str, str], float] = {}
     for algo in args.algos.split(","):
         config = dataclasses.replace(base, algo=Algo(algo))
         for collection in (Collection.inline, Collection.process):
-            per_k = seconds_per_kilostep(config, collection, args.cycles, args.warmup)
+            per_k, threads = seconds_per_kilostep(config, collection, args.cycles, args.warmup)
             results[algo, collection.value] = per_k
-            print(f"{algo:<6} {collection.value:<10} {per_k:>13.2f} {1000 / per_k:>12.0f}")
+            print(f"{algo:<6} {collection.value:<10} {threads:>7} {per_k:>13.2f} {1000 / per_k:>12.0f}")
     for algo in args.algos.split(","):
         gain = results[algo, "inline"] / results[algo, "process"]
         print(f"collecting process gain, {algo}: {gain:.2f}x")
