@@ -10,7 +10,7 @@ from pathlib import Path
 # A budget that exercises every part of training in about a second per epoch.
 TINY = [
     "--n-cycles", "2", "--updates-per-cycle", "5", "--batch-size", "32", "--hidden-sizes", "32", "32",
-    "--test-episodes", "2", "--buffer-size", "20000", "--no-progress",
+    "--test-episodes", "2", "--buffer-size", "20000", "--threads", "1", "--no-progress",
 ]  # fmt: skip
 
 

@@ -5,8 +5,18 @@ import dataclasses
 import pytest
 import torch
 
+from dtd import runs
 from dtd.checkpoint import FORMAT_VERSION, load_checkpoint, save_atomic
-from dtd.config import Algo, LearnerConfig, Preset, RelabelWindow, TrainConfig, preset_config, with_settings
+from dtd.config import (
+    Algo,
+    Collection,
+    LearnerConfig,
+    Preset,
+    RelabelWindow,
+    TrainConfig,
+    preset_config,
+    with_settings,
+)
 from dtd.errors import CheckpointError, ConfigError
 from dtd.runs import resumed_config
 
@@ -110,3 +120,15 @@ def test_resuming_keeps_the_runs_preset():
     assert resumed_config(paper, preset_config(Preset.paper, epochs=80)) == resumed
     with pytest.raises(ConfigError, match="--preset"):
         resumed_config(TrainConfig(env="FetchReach-v4"), preset_config(Preset.paper))
+
+
+@pytest.mark.parametrize(
+    ("cores", "collector", "expected"),
+    [(1, "auto", (1, "inline")), (2, "auto", (2, "inline")), (3, "auto", (2, "process")),
+     (16, "auto", (4, "process")), (2, "process", (1, "process")), (8, "inline", (4, "inline"))],
+)  # fmt: skip
+def test_automatic_threads_and_collector_fit_the_cores(monkeypatch, cores, collector, expected):
+    monkeypatch.setattr(runs, "usable_cores", lambda: cores)
+    collection = Collection(collector)
+    assert (runs.resolved_threads(0, collection), runs.resolved_collection(collection).value) == expected
+    assert runs.resolved_threads(3, collection) == 3  # given threads are kept
