@@ -12,7 +12,6 @@ epochs, see ``dtd.curves.SMOOTHING``) and the final eval success. A benchmark, n
 from __future__ import annotations
 
 import argparse
-import os
 import platform
 from pathlib import Path
 
@@ -20,6 +19,7 @@ import numpy as np
 
 from dtd.config import Algo, Collection, TrainConfig, with_settings
 from dtd.curves import SMOOTHING, Curve, read_curve
+from dtd.runs import usable_cores
 from dtd.trials import Trial, TrialOutcome, run_local
 
 LEVELS = (0.5, 0.9)
@@ -44,7 +44,7 @@ def main() -> None:
     )
     args = parser.parse_args()
 
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    cores = usable_cores()
     workers = args.workers or max(1, min(args.seeds, cores))
     base = with_settings(TrainConfig(env=args.env, algo=Algo(args.algo)), args.set)
     if workers > 1:
