@@ -39,9 +39,9 @@ class RelabelWindow(enum.Enum):
 
 
 class Collection(enum.Enum):
-    """Where training episodes are collected. Either way the run is the same, step for step:
-    a cycle's episodes are collected while the learner makes the previous cycle's updates,
-    with the policy from before them; only the wall time differs."""
+    """Where training episodes are collected. At the same ``--threads`` the run is the same
+    either way, step for step: a cycle's episodes are collected while the learner makes the
+    previous cycle's updates, with the policy from before them; only the wall time differs."""
 
     auto = "auto"
     """``process`` where at least three cores are free for the run, else ``inline`` (on two
@@ -131,7 +131,9 @@ class TrainConfig:
     and recorded in the run's config.json. Runs with the same thread count are the same bit
     for bit."""
     collector: Collection = Collection.auto
-    """Where training episodes are collected (a matter of speed only; the run is the same)."""
+    """Where training episodes are collected (a matter of speed only: at the same thread count
+    the run is the same; with ``--threads 0`` a collecting process leaves the learner a core
+    fewer)."""
     learner: tyro.conf.OmitArgPrefixes[LearnerConfig] = LearnerConfig()
     """Settings of the DDPG learner (of the low level, for dtd)."""
     segments: int = 2
