@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dtd.config import Algo, Collection, TrainConfig, with_settings
+from dtd.config import Algo, Collection, Preset, preset_config, with_settings
 from dtd.curves import SMOOTHING, Curve, read_curve
 from dtd.runs import usable_cores
 from dtd.trials import Trial, TrialOutcome, run_local
@@ -31,6 +31,7 @@ def main() -> None:
     )
     parser.add_argument("--env", default="FetchPush-v4")
     parser.add_argument("--algo", default="her", choices=[a.value for a in Algo])
+    parser.add_argument("--preset", default="tuned", choices=[p.value for p in Preset])
     parser.add_argument("--seeds", type=int, default=3, help="seeds 0..N-1")
     parser.add_argument("--steps", type=int, default=200_000, help="env steps per seed")
     parser.add_argument("--out", type=Path, required=True, help="one run directory per seed goes here")
@@ -46,7 +47,7 @@ def main() -> None:
 
     cores = usable_cores()
     workers = args.workers or max(1, min(args.seeds, cores))
-    base = with_settings(TrainConfig(env=args.env, algo=Algo(args.algo)), args.set)
+    base = with_settings(preset_config(Preset(args.preset), env=args.env, algo=Algo(args.algo)), args.set)
     if workers > 1:
         # The runs share the cores: each keeps to its share, without a collecting process.
         share = max(1, cores // workers)
@@ -66,7 +67,7 @@ def main() -> None:
     print(f"{len(trials)} run(s) of {args.steps} env steps, {workers} at once, into {args.out}", flush=True)
     outcomes = run_local(trials, workers, done)
     curves = {o.trial.name: read_curve(o.trial.run_dir) for o in outcomes if o.ok}
-    settings = " ".join(args.set) or "(defaults)"
+    settings = " ".join([f"preset={args.preset}", *args.set])
     print(f"# {args.algo} on {args.env}, {len(curves)} seed(s), {args.steps} env steps, settings {settings}, "
           f"{platform.machine()}, {cores} core(s), {workers} run(s) at once")  # fmt: skip
     print(summary(curves))
