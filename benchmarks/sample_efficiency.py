@@ -79,26 +79,23 @@ def summary(curves: dict[str, Curve]) -> str:
     lines = [
         f"{'run':<14} " + " ".join(f"{h:>16}" for h in heads) + f" {'final':>6} {'steps':>8} {'wall':>7}"
     ]
-    table: dict[str, list[list[float]]] = {h: [] for h in heads}
+    table: dict[str, list[float]] = {h: [] for h in heads}
     finals, walls = [], []
     for name, curve in curves.items():
         cells = []
         for level in LEVELS:
             reached = curve.first_reaching(level)
-            table[f"steps to {level}"].append([reached[0] if reached else np.inf])
-            table[f"wall to {level}"].append([reached[1] if reached else np.inf])
+            table[f"steps to {level}"].append(reached[0] if reached else np.inf)
+            table[f"wall to {level}"].append(reached[1] if reached else np.inf)
         for head in heads:
-            value = table[head][-1][0]
+            value = table[head][-1]
             cells.append(f"{'not reached':>16}" if np.isinf(value) else f"{value:>16.0f}")
         finals.append(curve.final_success)
         walls.append(float(curve.wall_s[-1]) if len(curve) else 0.0)
         steps = int(curve.env_steps[-1]) if len(curve) else 0
         lines.append(f"{name:<14} " + " ".join(cells) + f" {finals[-1]:>6.2f} {steps:>8} {walls[-1]:>6.0f}s")
     if len(curves) > 1:
-        cells = []
-        for head in heads:
-            values = np.array([v[0] for v in table[head]])
-            cells.append(f"{_median_range(values):>16}")
+        cells = [f"{_median_range(np.array(table[head])):>16}" for head in heads]
         lines.append(
             f"{'median [range]':<14} "
             + " ".join(cells)
