@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from dtd.config import Algo, Collection, Preset, preset_config, with_settings
+from dtd.config import Algo, Preset, preset_config, with_settings
 from dtd.curves import SMOOTHING, Curve, read_curve
-from dtd.runs import usable_cores
-from dtd.trials import Trial, TrialOutcome, run_local
+from dtd.runs import epochs_for_steps, usable_cores
+from dtd.trials import Trial, TrialOutcome, run_local, sharing_cores
 
 LEVELS = (0.5, 0.9)
 
@@ -48,15 +48,10 @@ def main() -> None:
     cores = usable_cores()
     workers = args.workers or max(1, min(args.seeds, cores))
     base = with_settings(preset_config(Preset(args.preset), env=args.env, algo=Algo(args.algo)), args.set)
-    if workers > 1:
-        # The runs share the cores: each keeps to its share, without a collecting process.
-        share = max(1, cores // workers)
-        if base.threads == 0:
-            base = with_settings(base, [f"threads={share}"])
-        if base.collector is Collection.auto:
-            base = with_settings(base, ["collector=inline"])
+    base = sharing_cores(base, workers, cores)
+    base = with_settings(base, [f"epochs={epochs_for_steps(base, args.steps)}"])
     trials = [
-        Trial(with_settings(base, [f"seed={seed}"]), args.steps, args.out / f"{args.algo}-s{seed}")
+        Trial(with_settings(base, [f"seed={seed}"]), args.out / f"{args.algo}-s{seed}")
         for seed in range(args.seeds)
     ]
 

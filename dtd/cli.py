@@ -52,6 +52,89 @@ def train(
     )
 
 
+def sweep(
+    config: Annotated[TrainConfig, tyro.conf.arg(name="")],
+    out: Path,
+    algos: str = "ddpg,her,dtd",
+    seeds: int = 5,
+    workers: int = 0,
+    ray: str | None = None,
+    progress: bool = True,
+) -> None:
+    """Train every (algorithm, seed) pair of one configuration, each into OUT/<env>-<algo>-s<seed>.
+
+    Run again on the same --out, finished trials are left alone and interrupted ones resume
+    from their checkpoints. A failing trial is reported and does not stop the others. With
+    --ray the trials are tasks of a Ray cluster: auto joins the cluster running here (or
+    starts a local one for the sweep), local always starts one, anything else is a cluster's
+    address (ray://host:10001); each task asks for as many CPUs as it has torch threads
+    (--threads, 1 by default).
+
+    Examples:
+      dtd sweep --env FetchPush-v4 --algos ddpg,her,dtd --seeds 5 --epochs 50 --out runs/push-sweep
+      dtd sweep --env FetchPush-v4 --preset paper --seeds 3 --out runs/push-sweep-paper
+      dtd sweep --env FetchPush-v4 --seeds 5 --out /shared/push-sweep --ray auto
+      dtd plot runs/push-sweep
+
+    Args:
+        config: Settings shared by every trial (--algo is replaced by --algos; --seed is the first seed).
+        out: Directory of the trials' run directories (on a cluster: a path every node reaches).
+        algos: Comma-separated algorithms, each trained with every seed.
+        seeds: Seeds per algorithm: --seed, --seed + 1, ...
+        workers: Local trials at once (0: one per core); they share the cores' torch threads.
+        ray: Run on Ray instead: auto, local or a cluster address (needs pip install 'dtd[ray]').
+        progress: Show a live progress bar.
+    """
+    from dtd.config import Algo
+    from dtd.errors import ConfigError
+    from dtd.plots import find_runs, summaries, summary_table
+    from dtd.sweep import run_sweep, sweep_trials
+
+    try:
+        chosen = [Algo(name.strip()) for name in algos.split(",") if name.strip()]
+    except ValueError as exc:
+        raise ConfigError(f"--algos: {exc}; choose from {', '.join(a.value for a in Algo)}") from exc
+    trials = sweep_trials(config, chosen, seeds, out)
+    outcomes = run_sweep(trials, workers=workers, ray_address=ray, show_progress=progress)
+    failed = [outcome for outcome in outcomes if not outcome.ok]
+    for outcome in failed:
+        print(f"{outcome.trial.name} failed:\n{outcome.error}", file=sys.stderr)
+    runs = find_runs([trial.run_dir for trial in trials if trial.run_dir.is_dir()])
+    if runs:
+        print(summary_table(summaries(runs)))
+    print(f"{len(outcomes) - len(failed)} of {len(outcomes)} trials finished in {out}")
+    if failed:
+        sys.exit(1)
+
+
+def plot(
+    run_dirs: tyro.conf.Positional[tuple[Path, ...]],
+    out: Path | None = None,
+) -> None:
+    """Draw success against epochs and env steps per environment, and write summary.csv.
+
+    Every run found under RUN_DIRS (any folder with a config.json) counts; runs are grouped
+    by environment and algorithm (and preset, where not the default). Lines are the mean over
+    seeds, bands the 25th-75th percentile.
+
+    Examples:
+      dtd plot runs/push-sweep
+      dtd plot runs/push-sweep runs/push-sweep-paper --out docs/results/push
+
+    Args:
+        run_dirs: Sweep or run directories to read.
+        out: Where the figures (PNG and SVG per environment) and summary.csv go (default: the first RUN_DIR).
+    """
+    from dtd.plots import plot as draw_plots
+
+    if not run_dirs:
+        raise DtdError("give at least one directory of runs")
+    result = draw_plots(run_dirs, out if out is not None else run_dirs[0])
+    print(result.table)
+    for path in [*result.figures, result.summary_csv]:
+        print(f"wrote {path}")
+
+
 def evaluate(
     run_dir: tyro.conf.Positional[Path],
     episodes: int = 100,
@@ -110,10 +193,18 @@ def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``dtd`` command."""
     args = sys.argv[1:] if argv is None else argv
     # The preset supplies the defaults the other options override, so it is read first.
-    train_command = functools.partial(train, config=preset_config(preset_named(args)))
+    preset = preset_config(preset_named(args))
+    commands = {
+        "train": functools.partial(train, config=preset),
+        "sweep": functools.partial(sweep, config=preset),
+        "plot": plot,
+        "eval": evaluate,
+    }
     try:
+        if args[:1] == ["sweep"] and any(arg == "--algo" or arg.startswith("--algo=") for arg in args):
+            raise DtdError("dtd sweep takes --algos (comma-separated), not --algo")
         tyro.extras.subcommand_cli_from_dict(
-            {"train": train_command, "eval": evaluate},
+            commands,
             prog="dtd",
             description="Dot-to-Dot: train and explain goal-conditioned agents (DDPG, HER, DtD).",
             args=args,

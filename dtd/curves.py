@@ -66,3 +66,50 @@ def read_curve(run_dir: Path) -> Curve:
         return Curve(*(np.array([float(row[name]) for row in rows]) for name in columns))
     except (KeyError, ValueError) as exc:
         raise RunDirError(f"{run.metrics} is not a dtd metrics file: {exc}") from exc
+
+
+def quantile(values: np.ndarray, q: float) -> float:
+    """The ``q`` quantile of ``values`` (linear between order statistics), where ``inf`` stands
+    for "never reached": any interpolation toward an ``inf`` is ``inf`` (NumPy's would be NaN)."""
+    ordered = np.sort(np.asarray(values, dtype=float))
+    if len(ordered) == 0:
+        return float("nan")
+    position = q * (len(ordered) - 1)
+    low, high = int(np.floor(position)), int(np.ceil(position))
+    if low == high or ordered[low] == ordered[high]:
+        return float(ordered[low])
+    if np.isinf(ordered[high]):
+        return float("inf")
+    return float(ordered[low] + (position - low) * (ordered[high] - ordered[low]))
+
+
+@dataclasses.dataclass(frozen=True)
+class Band:
+    """Eval success over several runs, epoch by epoch: the mean and the 25th-75th percentile
+    band. A run that stopped earlier counts only at the epochs it has; ``runs`` says how many
+    runs each point is over (never padded)."""
+
+    epoch: np.ndarray
+    env_steps: np.ndarray
+    mean: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    runs: np.ndarray
+
+
+def band(curves: list[Curve]) -> Band:
+    """The :class:`Band` of ``curves`` (of runs whose epochs hold the same env steps)."""
+    length = max((len(curve) for curve in curves), default=0)
+    columns: dict[str, list[float]] = {name: [] for name in ("epoch", "env_steps", "mean", "low", "high")}
+    runs = []
+    for index in range(length):
+        present = [curve for curve in curves if len(curve) > index]
+        values = np.array([curve.eval_success[index] for curve in present])
+        columns["epoch"].append(float(np.median([curve.epoch[index] for curve in present])))
+        columns["env_steps"].append(float(np.median([curve.env_steps[index] for curve in present])))
+        columns["mean"].append(float(values.mean()))
+        columns["low"].append(quantile(values, 0.25))
+        columns["high"].append(quantile(values, 0.75))
+        runs.append(len(present))
+    arrays = {name: np.array(column) for name, column in columns.items()}
+    return Band(**arrays, runs=np.array(runs, dtype=int))

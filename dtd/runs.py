@@ -315,24 +315,35 @@ def train(
         close_all(components)
 
 
-def train_for_steps(config: TrainConfig, steps: int, run_dir: Path) -> TrainState:
-    """Train until at least ``steps`` env steps, resuming a run already in ``run_dir``."""
-    horizon = env_spec_of(config).horizon
-    per_epoch = config.n_cycles * config.episodes_per_cycle * horizon
-    config = dataclasses.replace(config, epochs=math.ceil(steps / per_epoch))
+def train_to_end(config: TrainConfig, run_dir: Path) -> TrainState:
+    """Bring the run in ``run_dir`` to ``config.epochs``: start it, resume it from its last
+    checkpoint, or leave it as it is when it has already trained that far."""
     run = RunDir(Path(run_dir))
     if run.config.exists():
-        recorded = _epochs_recorded(run)
+        recorded = epochs_recorded(run.root)
         if recorded >= config.epochs:
             return TrainState(epoch=recorded)  # nothing left to train
         return train(config, resume=run.root, show_progress=False)
     return train(config, run_dir=run.root, show_progress=False)
 
 
-def _epochs_recorded(run: RunDir) -> int:
-    if not run.metrics.exists():
+def train_for_steps(config: TrainConfig, steps: int, run_dir: Path) -> TrainState:
+    """Train until at least ``steps`` env steps, resuming a run already in ``run_dir``."""
+    return train_to_end(dataclasses.replace(config, epochs=epochs_for_steps(config, steps)), run_dir)
+
+
+def epochs_for_steps(config: TrainConfig, steps: int) -> int:
+    """Whole epochs of ``config`` that hold at least ``steps`` env steps."""
+    horizon = env_spec_of(config).horizon
+    return math.ceil(steps / (config.n_cycles * config.episodes_per_cycle * horizon))
+
+
+def epochs_recorded(run_dir: Path) -> int:
+    """Epochs the run in ``run_dir`` has finished: the rows of its metrics.csv (0 if none)."""
+    metrics = RunDir(Path(run_dir)).metrics
+    if not metrics.exists():
         return 0
-    with open(run.metrics) as file:
+    with open(metrics) as file:
         return max(0, sum(1 for line in file if line.strip()) - 1)
 
 

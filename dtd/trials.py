@@ -1,14 +1,15 @@
-"""Many training runs ("trials") side by side in local processes, each resumable.
+"""Many training runs ("trials") at once: in local processes, or as tasks of a Ray cluster.
 
-A trial is a configuration, a budget of env steps and a run directory. Run again on the same
-directories, finished trials are skipped and interrupted ones resume from their checkpoints
-(:func:`dtd.runs.train_for_steps`). A failing trial is reported with its traceback and does
-not stop the others.
+A trial is a configuration (its ``epochs`` the budget) and a run directory. Run again on the
+same directories, finished trials are left alone and interrupted ones resume from their last
+checkpoint (:func:`dtd.runs.train_to_end`). A failing trial is reported with its traceback
+and does not stop the others.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
 import dataclasses
 import multiprocessing
 import time
@@ -16,16 +17,21 @@ import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from dtd.config import TrainConfig
+from dtd.config import Collection, TrainConfig
+from dtd.errors import DtdError
+
+LOG_NAME = "train.log"
+"""File in a trial's run directory that receives what its training writes to stderr."""
+
+POLL_S = 2.0
+"""Seconds between calls of a runner's ``on_wait`` while trials are running."""
 
 
 @dataclasses.dataclass(frozen=True)
 class Trial:
-    """One training run of a sweep."""
+    """One training run of a sweep: ``config`` trained to ``config.epochs`` in ``run_dir``."""
 
     config: TrainConfig
-    steps: int
-    """Budget in env steps (rounded up to whole epochs)."""
     run_dir: Path
 
     @property
@@ -40,20 +46,42 @@ class TrialOutcome:
     trial: Trial
     error: str | None
     wall_s: float
-    """Seconds this call spent on the trial (0 for one finished before)."""
+    """Seconds this call spent on the trial (close to 0 for one finished before)."""
 
     @property
     def ok(self) -> bool:
         return self.error is None
 
 
+OnDone = Callable[[TrialOutcome], None]
+OnWait = Callable[[], None]
+
+
+def sharing_cores(config: TrainConfig, workers: int, cores: int) -> TrainConfig:
+    """``config`` for one of ``workers`` trials running at once on ``cores`` cores: automatic
+    torch threads become an equal share of the cores, and episodes are collected inline (a
+    collecting process per trial would only add processes fighting for the same cores).
+    Settings given explicitly are kept."""
+    if workers <= 1:
+        return config
+    changes: dict[str, object] = {}
+    if config.threads == 0:
+        changes["threads"] = max(1, cores // workers)
+    if config.collector is Collection.auto:
+        changes["collector"] = Collection.inline
+    return dataclasses.replace(config, **changes)
+
+
 def run_trial(trial: Trial) -> TrialOutcome:
-    """Train ``trial`` to its budget (resuming, or skipping a finished run); never raises."""
-    from dtd.runs import train_for_steps
+    """Train ``trial`` to its last epoch (resuming, or leaving a finished run); never raises."""
+    from dtd.runs import train_to_end
 
     start = time.perf_counter()
     try:
-        train_for_steps(trial.config, trial.steps, trial.run_dir)
+        trial.run_dir.mkdir(parents=True, exist_ok=True)
+        # Each trial's epoch lines and warnings go to its own log, not into the sweep's display.
+        with open(trial.run_dir / LOG_NAME, "a") as log, contextlib.redirect_stderr(log):
+            train_to_end(trial.config, trial.run_dir)
     except Exception:
         return TrialOutcome(trial, traceback.format_exc(), time.perf_counter() - start)
     return TrialOutcome(trial, None, time.perf_counter() - start)
@@ -62,26 +90,27 @@ def run_trial(trial: Trial) -> TrialOutcome:
 def run_local(
     trials: Sequence[Trial],
     workers: int,
-    on_done: Callable[[TrialOutcome], None] | None = None,
+    on_done: OnDone | None = None,
+    on_wait: OnWait | None = None,
 ) -> list[TrialOutcome]:
     """Run ``trials`` in a pool of ``workers`` processes; outcomes in the order of ``trials``.
 
-    ``on_done`` is called in this process as each trial ends. With one worker the trials run
-    here, one after the other.
+    ``on_done`` is called in this process as each trial ends, ``on_wait`` every
+    :data:`POLL_S` seconds meanwhile. Even one worker is a process of its own, so that a trial
+    that crashes its interpreter is reported like any other failure.
     """
     if workers < 1:
         raise ValueError(f"workers must be at least 1, got {workers}")
     outcomes: dict[int, TrialOutcome] = {}
-    if workers == 1:
-        for index, trial in enumerate(trials):
-            outcomes[index] = run_trial(trial)
-            if on_done is not None:
-                on_done(outcomes[index])
-    else:
-        context = multiprocessing.get_context("spawn")
-        with concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-            futures = {pool.submit(run_trial, trial): index for index, trial in enumerate(trials)}
-            for future in concurrent.futures.as_completed(futures):
+    context = multiprocessing.get_context("spawn")
+    with concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        futures = {pool.submit(run_trial, trial): index for index, trial in enumerate(trials)}
+        pending = set(futures)
+        while pending:
+            done, pending = concurrent.futures.wait(
+                pending, timeout=POLL_S, return_when=concurrent.futures.FIRST_COMPLETED
+            )
+            for future in done:
                 index = futures[future]
                 try:
                     outcomes[index] = future.result()
@@ -89,4 +118,79 @@ def run_local(
                     outcomes[index] = TrialOutcome(trials[index], traceback.format_exc(), 0.0)
                 if on_done is not None:
                     on_done(outcomes[index])
+            if on_wait is not None:
+                on_wait()
     return [outcomes[index] for index in range(len(trials))]
+
+
+def run_ray(
+    trials: Sequence[Trial],
+    address: str,
+    on_done: OnDone | None = None,
+    on_wait: OnWait | None = None,
+) -> list[TrialOutcome]:
+    """Run ``trials`` as Ray tasks; outcomes in the order of ``trials``.
+
+    ``address``: ``auto`` joins the Ray cluster running on this machine's network (or, if
+    none is found, starts a local one for these trials), ``local`` always starts a local one,
+    anything else is a cluster address (``ray://host:10001`` or ``host:6379``). Where Ray is
+    already initialised in this process, that session is used as it is. Each task asks Ray
+    for as many CPUs as its trial has torch threads, so Ray places no more trials on a node
+    than it has cores. Run directories must lie where every node can reach them.
+    """
+    ray = _import_ray()
+    started_here = not ray.is_initialized()
+    if started_here:
+        _init_ray(ray, address)
+    try:
+        remote = ray.remote(run_trial)
+        refs = {
+            remote.options(num_cpus=max(1, trial.config.threads)).remote(trial): index
+            for index, trial in enumerate(trials)
+        }
+        outcomes: dict[int, TrialOutcome] = {}
+        pending = list(refs)
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1, timeout=POLL_S)
+            for ref in done:
+                index = refs[ref]
+                try:
+                    outcomes[index] = ray.get(ref)
+                except Exception:  # the task or its worker died
+                    outcomes[index] = TrialOutcome(trials[index], traceback.format_exc(), 0.0)
+                if on_done is not None:
+                    on_done(outcomes[index])
+            if on_wait is not None:
+                on_wait()
+        return [outcomes[index] for index in range(len(trials))]
+    finally:
+        if started_here:
+            ray.shutdown()
+
+
+def _import_ray():
+    try:
+        import ray
+    except ImportError as exc:
+        raise DtdError("--ray needs Ray, an optional extra: pip install 'dtd[ray]'") from exc
+    return ray
+
+
+def _init_ray(ray, address: str) -> None:
+    if address == "local":
+        ray.init()
+    elif address == "auto":
+        try:
+            ray.init(address="auto")
+        except ConnectionError:  # no cluster running: one on this machine, for these trials
+            ray.init()
+    else:
+        try:
+            ray.init(address=address)
+        except ConnectionError as exc:
+            raise DtdError(f"no Ray cluster answers at {address}: {exc}") from exc
+
+
+def trials_root(path: Path) -> Path:
+    """``path`` made absolute, as every worker (on any node) must read it the same way."""
+    return Path(path).expanduser().resolve()

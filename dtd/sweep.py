@@ -1,0 +1,122 @@
+"""A sweep: every (algorithm, seed) trial of one configuration, each in its own run directory.
+
+Locally the trials share this machine's cores through a pool of processes; with a Ray address
+they become tasks of a Ray cluster. Either way, a sweep run again on the same directory leaves
+finished trials alone and resumes interrupted ones (:mod:`dtd.trials`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from pathlib import Path
+
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+from dtd.config import Algo, TrainConfig
+from dtd.errors import ConfigError
+from dtd.runs import epochs_recorded, usable_cores
+from dtd.trials import Trial, TrialOutcome, run_local, run_ray, sharing_cores, trials_root
+
+
+def trial_name(config: TrainConfig) -> str:
+    """<env>-<algo>-s<seed>, the run directory's name inside the sweep's directory."""
+    env = (config.env or "env").split(":")[-1]
+    return f"{env}-{config.algo.value}-s{config.seed}"
+
+
+def sweep_trials(base: TrainConfig, algos: Sequence[Algo], seeds: int, out: Path) -> list[Trial]:
+    """Trials of ``base`` for each algorithm and ``seeds`` seeds from ``base.seed``; ordered seed
+    by seed, so that the first results hold every algorithm."""
+    if not algos:
+        raise ConfigError("--algos names no algorithm")
+    if len(set(algos)) != len(algos):
+        raise ConfigError(f"--algos names an algorithm twice: {','.join(a.value for a in algos)}")
+    if seeds < 1:
+        raise ConfigError(f"--seeds must be at least 1, got {seeds}")
+    root = trials_root(out)
+    trials = []
+    for seed in range(base.seed, base.seed + seeds):
+        for algo in algos:
+            config = dataclasses.replace(base, algo=algo, seed=seed)
+            config.validate()
+            trials.append(Trial(config, root / trial_name(config)))
+    return trials
+
+
+def workers_for(trials: Sequence[Trial], workers: int) -> int:
+    """``workers``, or for 0 one per usable core (never more than there are trials)."""
+    if workers < 0:
+        raise ConfigError(f"--workers must be 0 (one per core) or more, got {workers}")
+    return workers or max(1, min(len(trials), usable_cores()))
+
+
+class SweepProgress:
+    """A progress bar over all the sweep's epochs, read from the run directories, and a line
+    per trial as it ends."""
+
+    def __init__(self, trials: Sequence[Trial], enabled: bool) -> None:
+        self.trials = trials
+        self.console = Console(stderr=True)
+        self.progress = Progress(
+            TextColumn("[bold]sweep"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("epochs, {task.fields[done]} of {task.fields[trials]} trials ended"),
+            TimeElapsedColumn(),
+            console=self.console,
+            disable=not enabled,
+        )
+        total = sum(trial.config.epochs for trial in trials)
+        self.task = self.progress.add_task("sweep", total=total, done=0, trials=len(trials))
+        self.ended = 0
+
+    def __enter__(self) -> SweepProgress:
+        self.progress.start()
+        self.refresh()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.refresh()
+        self.progress.stop()
+
+    def refresh(self) -> None:
+        epochs = sum(min(epochs_recorded(t.run_dir), t.config.epochs) for t in self.trials)
+        self.progress.update(self.task, completed=epochs, done=self.ended)
+
+    def trial_ended(self, outcome: TrialOutcome) -> None:
+        self.ended += 1
+        epochs = epochs_recorded(outcome.trial.run_dir)
+        if outcome.ok:
+            self.console.print(f"{outcome.trial.name}: {epochs} epochs ({outcome.wall_s:.0f} s)")
+        else:
+            last_line = outcome.error.strip().splitlines()[-1] if outcome.error else "?"
+            self.console.print(f"[red]{outcome.trial.name}: FAILED after {epochs} epochs: {last_line}")
+        self.refresh()
+
+
+def run_sweep(
+    trials: Sequence[Trial],
+    workers: int = 0,
+    ray_address: str | None = None,
+    show_progress: bool = True,
+) -> list[TrialOutcome]:
+    """Run ``trials`` locally (``workers`` processes, 0 = one per core) or on Ray; return the
+    outcomes in the order of ``trials``."""
+    if ray_address is None:
+        count = workers_for(trials, workers)
+        trials = [
+            dataclasses.replace(t, config=sharing_cores(t.config, count, usable_cores())) for t in trials
+        ]
+    else:
+        # On a cluster each trial keeps to its torch threads (1 unless --threads says more), and
+        # Ray gives it as many CPUs: a node then runs as many trials as it has cores.
+        trials = [
+            dataclasses.replace(t, config=dataclasses.replace(t.config, threads=t.config.threads or 1))
+            for t in trials
+        ]
+    with SweepProgress(trials, show_progress) as progress:
+        if ray_address is None:
+            return run_local(trials, count, progress.trial_ended, progress.refresh)
+        return run_ray(trials, ray_address, progress.trial_ended, progress.refresh)

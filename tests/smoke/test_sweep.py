@@ -1,0 +1,102 @@
+"""dtd sweep: trials side by side, interrupted and run again (skip the finished, resume the
+rest), failures that do not stop the others, the same trials on a local Ray."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from dtd.config import Algo, LearnerConfig, TrainConfig
+from dtd.runs import epochs_recorded
+from dtd.sweep import run_sweep, sweep_trials
+from dtd.trials import Trial, run_local
+from tests.helpers import TINY, dtd, read_metrics
+
+pytestmark = pytest.mark.smoke
+
+SWEEP = ["sweep", "--env", "FetchReach-v4", "--algos", "her,dtd", "--seeds", "2", "--epochs", "3", *TINY]
+NAMES = ["FetchReach-v4-her-s0", "FetchReach-v4-dtd-s0", "FetchReach-v4-her-s1", "FetchReach-v4-dtd-s1"]
+"""The order a one-worker sweep runs its trials in."""
+
+
+def tiny_config(**settings) -> TrainConfig:
+    """The TINY budget as a configuration: one epoch of FetchReach."""
+    tiny = dict(env="FetchReach-v4", epochs=1, n_cycles=2, updates_per_cycle=5, test_episodes=2)
+    tiny.update(buffer_size=20_000, threads=1, learner=LearnerConfig(hidden_sizes=(32, 32), batch_size=32))
+    return TrainConfig(**{**tiny, **settings})
+
+
+def test_an_interrupted_sweep_run_again_skips_finished_trials_and_resumes_the_others(tmp_path):
+    out = tmp_path / "sweep"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "dtd", *SWEEP, "--workers", "1", "--out", str(out)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,  # the sweep and its worker, killed together as by a scheduler
+    )
+    first, second = (out / name for name in NAMES[:2])
+    deadline = time.monotonic() + 240
+    while not (epochs_recorded(first) == 3 and epochs_recorded(second) >= 1):
+        assert process.poll() is None, "the sweep ended before it could be interrupted"
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    os.killpg(process.pid, signal.SIGKILL)
+    process.wait()
+    interrupted_at = epochs_recorded(second)
+    assert 1 <= interrupted_at < 3
+    assert epochs_recorded(out / NAMES[2]) == 0
+    finished = (first / "metrics.csv", first / "checkpoints" / "latest.pt")
+    finished_files = {path: path.stat().st_mtime_ns for path in finished}
+    rows_before = read_metrics(second)
+
+    result = dtd(*SWEEP, "--workers", "2", "--out", out)
+    assert result.returncode == 0, result.stderr
+    assert "4 of 4 trials finished" in result.stdout
+    assert all(epochs_recorded(out / name) == 3 for name in NAMES)
+    # Nothing finished is redone, nothing done is lost.
+    assert {path: path.stat().st_mtime_ns for path in finished_files} == finished_files
+    assert read_metrics(second)[:interrupted_at] == rows_before
+    # The summary table covers both algorithms, over both seeds.
+    lines = [line.split() for line in result.stdout.splitlines()]
+    assert ["FetchReach-v4", "her", "2", "3"] in [line[:4] for line in lines]
+    assert ["FetchReach-v4", "dtd", "2", "3"] in [line[:4] for line in lines]
+
+    again = dtd(*SWEEP, "--workers", "2", "--out", out)
+    assert again.returncode == 0, again.stderr
+    assert [read_metrics(out / name)[-1]["epoch"] for name in NAMES] == ["3"] * 4
+
+
+def test_a_failing_trial_is_reported_and_the_others_finish(tmp_path):
+    good = Trial(tiny_config(algo=Algo.her), tmp_path / "good")
+    bad = Trial(tiny_config(algo=Algo.her, env="NoSuchTask-v0"), tmp_path / "bad")
+    seen = []
+    outcomes = run_local([bad, good], workers=2, on_done=lambda outcome: seen.append(outcome.trial.name))
+    assert sorted(seen) == ["bad", "good"]
+    assert not outcomes[0].ok and "NoSuchTask-v0" in outcomes[0].error
+    assert outcomes[1].ok and epochs_recorded(good.run_dir) == 1
+
+
+def test_sweep_refuses_algo_and_unknown_algos(tmp_path):
+    result = dtd(*SWEEP, "--algo", "her", "--out", tmp_path)
+    assert result.returncode == 2 and "--algos" in result.stderr
+    result = dtd(*SWEEP[:4], "her,sac", "--out", tmp_path)
+    assert result.returncode == 2 and "sac" in result.stderr
+
+
+def test_the_same_trials_run_as_ray_tasks(tmp_path):
+    ray = pytest.importorskip("ray")
+    trials = sweep_trials(tiny_config(), [Algo.her, Algo.dtd], 1, tmp_path / "ray-sweep")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        outcomes = run_sweep(trials, ray_address="auto", show_progress=False)
+    finally:
+        ray.shutdown()
+    assert [outcome.error for outcome in outcomes] == [None, None]
+    assert all(epochs_recorded(trial.run_dir) == 1 for trial in trials)
+    assert Path(trials[0].run_dir, "train.log").read_text().count("epoch 1/1") == 1

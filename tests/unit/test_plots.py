@@ -1,0 +1,98 @@
+"""Sweep figures and summary from synthetic metrics.csv files with known values."""
+
+import csv
+
+import numpy as np
+import pytest
+
+from dtd.config import Algo, Preset, TrainConfig
+from dtd.curves import Curve, band, quantile
+from dtd.errors import RunDirError
+from dtd.plots import find_runs, plot, summaries
+from dtd.run_dir import RunDir, write_config
+
+# eval success per epoch; epochs hold 1,000 env steps and 10 s each.
+HER = {
+    0: [0.2, 0.6, 1.0, 1.0],  # smoothed 0.2 0.4 0.6 0.87: 0.5 at epoch 3, never 0.9
+    1: [0.6, 0.9, 0.9, 1.0],  # smoothed 0.6 0.75 0.8 0.93: 0.5 at epoch 1, 0.9 at epoch 4
+    2: [0.0, 0.3],  # stopped after 2 epochs; never 0.5
+}
+
+
+def write_run(root, algo, seed, success, preset=Preset.tuned):
+    run = RunDir(root / f"FetchPush-v4-{algo}-s{seed}")
+    run.root.mkdir(parents=True)
+    write_config(run, TrainConfig(env="FetchPush-v4", algo=Algo(algo), seed=seed, preset=preset), {})
+    rows = ["epoch,env_steps,wall_s,eval_success,train_success"]
+    rows += [f"{e},{e * 1000},{e * 10.0},{s},0.0" for e, s in enumerate(success, start=1)]
+    run.metrics.write_text("\n".join(rows) + "\n")
+
+
+@pytest.fixture
+def sweep_dir(tmp_path):
+    for seed, success in HER.items():
+        write_run(tmp_path / "sweep", "her", seed, success)
+    write_run(tmp_path / "sweep", "dtd", 0, [0.5, 1.0, 1.0])
+    write_run(tmp_path / "paper", "dtd", 0, [0.0, 0.0, 0.1], preset=Preset.paper)
+    (tmp_path / "sweep" / "FetchPush-v4-ddpg-s0").mkdir()  # a trial that never started
+    return tmp_path
+
+
+def test_quantile_treats_inf_as_never_reached():
+    assert quantile(np.array([1.0, 2.0, 3.0]), 0.5) == 2.0
+    assert quantile(np.array([1.0, 2.0, 3.0, 4.0]), 0.25) == pytest.approx(1.75)
+    assert quantile(np.array([1000.0, 3000.0, np.inf]), 0.25) == 2000.0
+    assert quantile(np.array([1000.0, 3000.0, np.inf]), 0.75) == np.inf
+    assert quantile(np.array([np.inf, np.inf]), 0.5) == np.inf
+
+
+def test_band_counts_each_run_only_at_the_epochs_it_has():
+    epochs = [np.arange(1.0, len(s) + 1) for s in HER.values()]
+    curves = [Curve(e, e * 1000, e * 10, np.array(s)) for e, s in zip(epochs, HER.values(), strict=True)]
+    stats = band(curves)
+    np.testing.assert_array_equal(stats.runs, [3, 3, 2, 2])
+    np.testing.assert_allclose(stats.mean, [0.8 / 3, 1.8 / 3, 0.95, 1.0])  # no padding of the short run
+    np.testing.assert_allclose(stats.env_steps, [1000, 2000, 3000, 4000])
+    np.testing.assert_allclose(stats.low[:2], [0.1, 0.45])  # 25th percentile of (0, .2, .6), (.3, .6, .9)
+    np.testing.assert_allclose(stats.high[2:], [0.975, 1.0])
+
+
+def test_summary_numbers(sweep_dir):
+    rows = {row.label: row for row in summaries(find_runs([sweep_dir / "sweep", sweep_dir / "paper"]))}
+    assert set(rows) == {"her", "dtd", "dtd (paper)"}
+    her = rows["her"]
+    assert (her.runs, her.epochs_min, her.epochs_max) == (3, 2, 4)
+    final = her.final_success
+    assert (final.median, final.q25, final.q75) == pytest.approx((1.0, 0.65, 1.0))
+    assert her.reached == {0.5: 2, 0.9: 1}
+    assert (her.steps_to[0.5].median, her.steps_to[0.5].q25, her.steps_to[0.5].q75) == (3000, 2000, np.inf)
+    assert her.wall_to[0.5].median == 30.0
+    assert her.steps_to[0.9].median == np.inf
+    dtd = rows["dtd"]
+    assert dtd.steps_to[0.5].median == 1000  # smoothed 0.5 0.75 0.83
+    assert dtd.reached[0.9] == 0
+
+
+def test_plot_writes_figures_and_summary(sweep_dir):
+    result = plot([sweep_dir / "sweep", sweep_dir / "paper"], sweep_dir / "out")
+    png, svg = result.figures
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert png.stat().st_size > 10_000
+    assert "<svg" in svg.read_text()[:1000]
+    with open(result.summary_csv, newline="") as file:
+        rows = {row["algo"]: row for row in csv.DictReader(file)}
+    her = rows["her"]
+    assert her["runs"] == "3"
+    assert her["final_success_q25"] == "0.650"
+    assert her["env_steps_to_0.5_median"] == "3000"
+    assert her["env_steps_to_0.5_q75"] == "inf"
+    assert her["reached_0.9"] == "1"
+    assert her["wall_s_to_0.9_median"] == "inf"
+    assert "3000 [2000-not reached] (2/3)" in result.table
+
+
+def test_plot_of_nothing_says_so(tmp_path):
+    with pytest.raises(RunDirError, match="no run"):
+        plot([tmp_path], tmp_path / "out")
+    with pytest.raises(RunDirError, match="not a directory"):
+        plot([tmp_path / "missing"], tmp_path / "out")
