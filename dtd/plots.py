@@ -188,7 +188,7 @@ def draw(env: str, labels: dict[str, list[Curve]], path_stem: Path) -> list[Path
         style = {"color": _COLOURS.get(algo), "linestyle": "--" if "(" in label else "-"}
         for axis, x in zip(axes, (stats.epoch, stats.env_steps), strict=True):
             complete = stats.runs == len(curves)
-            name = f"{label} ({len(curves)} seeds)"
+            name = f"{label} ({len(curves)} seed{'s' if len(curves) != 1 else ''})"
             colour = axis.plot(x[complete], stats.mean[complete], label=name, **style)[0].get_color()
             if not complete.all():  # past the shortest run: fewer seeds, drawn faint
                 tail = np.flatnonzero(~complete)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -12,11 +12,21 @@ from dtd.agent import Agent
 from dtd.envs import EnvSpec
 from dtd.records import Episodes
 
+StepHook = Callable[[int, np.ndarray], None]
+"""Called with t and the (B, goal_dim) goals the policy pursues from the state at t: before
+acting at each step t (the environments hold the state at t), and once more at t = T."""
+
 
 def run_episodes(
-    envs: Sequence[gym.Env], agent: Agent, spec: EnvSpec, explore: bool, rng: np.random.Generator
+    envs: Sequence[gym.Env],
+    agent: Agent,
+    spec: EnvSpec,
+    explore: bool,
+    rng: np.random.Generator,
+    on_step: StepHook | None = None,
 ) -> Episodes:
-    """One episode on each environment, acting in lock-step with batched policy calls."""
+    """One episode on each environment, acting in lock-step with batched policy calls;
+    ``on_step`` sees every state (e.g. to render it)."""
     count, horizon = len(envs), spec.horizon
     obs = np.zeros((count, horizon + 1, spec.obs_dim), dtype=np.float32)
     achieved = np.zeros((count, horizon + 1, spec.goal_dim), dtype=np.float32)
@@ -34,11 +44,15 @@ def run_episodes(
     infos: list[dict[str, Any]] = [{} for _ in envs]
     for t in range(horizon):
         step_goals[:, t] = agent.step_goal(obs[:, t], achieved[:, t], desired, t, explore, rng)
+        if on_step is not None:
+            on_step(t, step_goals[:, t])
         actions[:, t] = agent.act(obs[:, t], step_goals[:, t], explore, rng)
         for i, env in enumerate(envs):
             step_obs, _, _, _, infos[i] = env.step(actions[i, t].reshape(env.action_space.shape))
             obs[i, t + 1] = step_obs["observation"].ravel()
             achieved[i, t + 1] = step_obs["achieved_goal"].ravel()
+    if on_step is not None:
+        on_step(horizon, step_goals[:, -1])
     for i, info in enumerate(infos):
         success[i] = float(info.get("is_success", 0.0))
     return Episodes(obs, achieved, actions, step_goals, desired, success)

@@ -5,6 +5,7 @@ metrics.csv            one row per finished epoch
 tensorboard/           TensorBoard event files with the same figures
 checkpoints/latest.pt  everything needed to resume, after the last finished epoch
 checkpoints/best.pt    the agent with the best evaluation success (no replay)
+checkpoints/first.pt   the agent after the first epoch (no replay), to compare with the last
 """
 
 from __future__ import annotations
@@ -19,6 +20,9 @@ from typing import Any
 from dtd.atomic import write_text_atomic
 from dtd.config import TrainConfig
 from dtd.errors import ConfigError, RunDirError
+
+CHECKPOINT_NAMES = ("latest", "best", "first")
+"""Checkpoints every run keeps: after the last epoch, of the best evaluation, after the first."""
 
 _VERSIONED = ("dtd", "torch", "numpy", "mujoco", "gymnasium", "gymnasium-robotics")
 
@@ -53,6 +57,10 @@ class RunDir:
     def best(self) -> Path:
         return self.checkpoints / "best.pt"
 
+    @property
+    def first(self) -> Path:
+        return self.checkpoints / "first.pt"
+
     def holds_run(self) -> bool:
         """Whether a run has already started here."""
         return self.config.exists() or self.metrics.exists() or self.checkpoints.exists()
@@ -65,8 +73,8 @@ class RunDir:
             shutil.rmtree(path, ignore_errors=True)
 
     def checkpoint(self, name: str) -> Path:
-        """``latest``, ``best``, or a path to a checkpoint file."""
-        if name in ("latest", "best"):
+        """``latest``, ``best``, ``first``, or a path to a checkpoint file."""
+        if name in CHECKPOINT_NAMES:
             return self.checkpoints / f"{name}.pt"
         return Path(name)
 

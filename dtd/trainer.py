@@ -116,6 +116,8 @@ class Trainer:
         if improved:
             state.best_eval_success = state.history[-1]["eval_success"]
             save_atomic(self.run.best, self.snapshot(state, include_replay=False))
+        if state.epoch == 1:  # kept to show what one epoch had learned (dtd heatmap)
+            save_atomic(self.run.first, self.snapshot(state, include_replay=False))
         save_atomic(self.run.latest, self.snapshot(state, include_replay=True))
 
     def snapshot(self, state: TrainState, include_replay: bool) -> dict[str, Any]:

@@ -1,0 +1,203 @@
+"""What the high level values: Q1(o, g, sub-goal) over a grid of sub-goals on the table.
+
+For the Fetch block tasks the block and the goal are put where the user says, the
+observation is read back from the simulator, and the high level's critic is evaluated at
+every cell of a grid over the table top (at the block's height, or at several heights for
+FetchPickAndPlace, whose goals may lie in the air).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from pathlib import Path
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from dtd.errors import ConfigError, EnvError
+from dtd.hierarchy import DotToDotAgent
+
+DEFAULT_START = (1.15, 0.55)
+"""The block's default place: near one corner of the table, as in the paper's figure."""
+DEFAULT_GOAL = (1.45, 0.95)
+"""The goal's default place: near the opposite corner."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Table:
+    """The top of the table in world coordinates (metres) and the resting block's height."""
+
+    x: tuple[float, float]
+    y: tuple[float, float]
+    block_z: float
+
+
+@dataclasses.dataclass(frozen=True)
+class Heatmap:
+    """The high level's values at each cell of one horizontal slice."""
+
+    xs: np.ndarray
+    ys: np.ndarray
+    z: float
+    values: np.ndarray
+    """(len(ys), len(xs)): row i is y = ys[i], column j is x = xs[j]."""
+    start: np.ndarray
+    goal: np.ndarray
+    subgoal: np.ndarray
+    """The sub-goal the agent would choose here (its deterministic high-level action)."""
+
+
+def table_of(env: gym.Env) -> Table:
+    """The table of a Fetch task (a body ``table0`` with a box geom, a block ``object0``)."""
+    unwrapped = env.unwrapped
+    model, data = unwrapped.model, unwrapped.data
+    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "table0")
+    block = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, "object0:joint")
+    if body < 0 or block < 0:
+        raise EnvError("heatmaps need a Fetch task with a block on a table (FetchPush, FetchPickAndPlace)")
+    geom = next(i for i in range(model.ngeom) if model.geom_bodyid[i] == body)
+    centre, half = data.geom_xpos[geom], model.geom_size[geom]
+    height = float(getattr(unwrapped, "height_offset", centre[2] + half[2]))
+    return Table(
+        (float(centre[0] - half[0]), float(centre[0] + half[0])),
+        (float(centre[1] - half[1]), float(centre[1] + half[1])),
+        height,
+    )
+
+
+def place_block_and_goal(
+    env: gym.Env, start: Sequence[float], goal: Sequence[float], seed: int = 0
+) -> dict[str, np.ndarray]:
+    """Reset ``env``, put the block at ``start`` (x, y on the table) and the goal at ``goal``
+    (x, y, or x, y, z), and return the observation read back from the simulator."""
+    table = table_of(env)
+    for name, point in (("--start", start), ("--goal", goal)):
+        x, y = point[0], point[1]
+        if not (table.x[0] <= x <= table.x[1] and table.y[0] <= y <= table.y[1]):
+            raise ConfigError(
+                f"{name} {x:.3f},{y:.3f} lies off the table (x {table.x[0]:.2f}..{table.x[1]:.2f}, "
+                f"y {table.y[0]:.2f}..{table.y[1]:.2f})"
+            )
+    env.reset(seed=seed)
+    unwrapped = env.unwrapped
+    qpos = np.array([start[0], start[1], table.block_z, 1.0, 0.0, 0.0, 0.0])
+    unwrapped._utils.set_joint_qpos(unwrapped.model, unwrapped.data, "object0:joint", qpos)
+    unwrapped._utils.set_joint_qvel(unwrapped.model, unwrapped.data, "object0:joint", np.zeros(6))
+    goal_z = goal[2] if len(goal) > 2 else table.block_z
+    unwrapped.goal = np.array([goal[0], goal[1], goal_z], dtype=np.float64)
+    mujoco.mj_forward(unwrapped.model, unwrapped.data)
+    return unwrapped._get_obs()
+
+
+def value_slice(
+    agent: DotToDotAgent, observation: dict[str, np.ndarray], table: Table, z: float, resolution: int
+) -> Heatmap:
+    """The high level's values over a ``resolution`` x ``resolution`` grid of sub-goals
+    (cell centres) covering the table top at height ``z``."""
+    if resolution < 2:
+        raise ConfigError(f"--resolution must be at least 2, got {resolution}")
+    xs = _centres(table.x, resolution)
+    ys = _centres(table.y, resolution)
+    grid_x, grid_y = np.meshgrid(xs, ys)
+    candidates = np.stack([grid_x.ravel(), grid_y.ravel(), np.full(grid_x.size, z)], axis=1)
+    goal = np.asarray(observation["desired_goal"], dtype=np.float64)
+    values = agent.subgoal_values(observation, goal, candidates).reshape(len(ys), len(xs))
+    subgoal = agent.propose_subgoals(
+        observation["observation"][None], observation["achieved_goal"][None], goal[None]
+    )[0]
+    return Heatmap(xs, ys, z, values, np.asarray(observation["achieved_goal"]), goal, subgoal)
+
+
+def _centres(extent: tuple[float, float], count: int) -> np.ndarray:
+    step = (extent[1] - extent[0]) / count
+    return extent[0] + step * (np.arange(count) + 0.5)
+
+
+def draw_heatmaps(
+    columns: Sequence[tuple[str, Sequence[Heatmap]]], table: Table, path: Path, title: str
+) -> Path:
+    """One column of panels per checkpoint (label, slices), one row per height, as an image
+    (the format follows ``path``'s suffix)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = max(len(slices) for _, slices in columns)
+    figure, axes = plt.subplots(
+        rows,
+        len(columns),
+        figsize=(5.2 * len(columns), 4.6 * rows + 0.6),
+        squeeze=False,
+        layout="constrained",
+    )
+    extent = (table.x[0], table.x[1], table.y[0], table.y[1])
+    for column, (label, slices) in enumerate(columns):
+        for row, heat in enumerate(slices):
+            axis = axes[row][column]
+            image = axis.imshow(heat.values, origin="lower", extent=extent, cmap="viridis", aspect="equal")
+            figure.colorbar(image, ax=axis, shrink=0.85, label="high-level value Q1(o, g, sub-goal)")
+            axis.plot(*heat.start[:2], "s", color="black", markersize=9, label="block")
+            axis.plot(*heat.goal[:2], "o", color="red", markersize=9, label="goal")
+            axis.plot(
+                *heat.subgoal[:2], "X", color="lime", markeredgecolor="black", markersize=11,
+                label=f"chosen sub-goal (z {heat.subgoal[2]:.2f} m)",
+            )  # fmt: skip
+            axis.set_xlabel("x (m, world frame)")
+            axis.set_ylabel("y (m, world frame)")
+            axis.set_title(f"{label}\nsub-goals at z = {heat.z:.3f} m", fontsize=10)
+            axis.legend(loc="upper left", fontsize=7, framealpha=0.8)
+        for row in range(len(slices), rows):
+            axes[row][column].set_axis_off()
+    figure.suptitle(title, fontsize=11)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+    return path
+
+
+def run_heatmaps(
+    run_dir: Path,
+    out: Path,
+    checkpoints: Sequence[str] = ("first", "latest"),
+    start: Sequence[float] = DEFAULT_START,
+    goal: Sequence[float] | None = None,
+    heights: Sequence[float] | None = None,
+    resolution: int = 60,
+) -> tuple[Path, list[tuple[str, list[Heatmap]]]]:
+    """Heatmaps of a dtd run's high level at each of ``checkpoints`` (a column each), drawn into
+    ``out``. Heights default to the block's resting height, and for tasks whose goals may lie
+    in the air (FetchPickAndPlace) also 10, 20 and 30 cm above it."""
+    from dtd.config import Algo
+    from dtd.run_dir import RunDir, read_config
+    from dtd.runs import close_all, load_run
+
+    config = read_config(RunDir(Path(run_dir)))
+    if config.algo is not Algo.dtd:
+        raise ConfigError(
+            f"heatmaps show a dtd run's high level; {run_dir} is a {config.algo.value} run, which has none"
+        )
+    if not checkpoints:
+        raise ConfigError("--checkpoint names no checkpoint")
+    rows: list[tuple[str, list[Heatmap]]] = []
+    table = None
+    for name in checkpoints:
+        loaded = load_run(Path(run_dir), name)
+        try:
+            env, agent = loaded.components.eval_envs[0], loaded.components.agent
+            assert isinstance(agent, DotToDotAgent)
+            table = table_of(env)
+            levels = heights
+            if levels is None:
+                in_air = bool(getattr(env.unwrapped, "target_in_the_air", False))
+                levels = [table.block_z + lift for lift in ((0.0, 0.1, 0.2, 0.3) if in_air else (0.0,))]
+            observation = place_block_and_goal(env, start, goal if goal is not None else DEFAULT_GOAL)
+            slices = [value_slice(agent, observation, table, z, resolution) for z in levels]
+            rows.append((f"after epoch {loaded.snapshot['state']['epoch']} ({name})", slices))
+        finally:
+            close_all(loaded.components)
+    assert table is not None
+    title = f"{config.env}: the high level's value of each sub-goal\nfor the block (black) and goal (red)"
+    return draw_heatmaps(rows, table, Path(out), title), rows

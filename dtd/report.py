@@ -1,0 +1,213 @@
+"""One self-contained HTML page per run: its configuration, training curves, the high level's
+heatmaps (dtd), key-frame strips and videos of rendered episodes, and each episode's plan.
+
+The page opens from disk with no server: ``RUN/report.html``, with its images and videos in
+``RUN/report/`` beside it, referenced by relative paths.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import html
+import json
+from pathlib import Path
+from typing import Any
+
+from dtd.atomic import write_text_atomic
+from dtd.config import Algo, flat_items
+from dtd.curves import read_curve
+from dtd.run_dir import RunDir, read_config
+
+ASSETS = "report"
+"""Folder beside report.html that holds its images and videos."""
+
+# Marks each image and video as loaded or broken (data-status), and says so on the page.
+_MEDIA_CHECK = """
+<script>
+function mark(element, ok) {
+  element.dataset.status = ok ? "loaded" : "error";
+  if (!ok) {
+    const note = document.createElement("p");
+    note.className = "broken";
+    note.textContent = "could not load " + (element.currentSrc || element.src);
+    element.after(note);
+  }
+}
+for (const image of document.querySelectorAll("img")) {
+  if (image.complete) mark(image, image.naturalWidth > 0);
+  else {
+    image.addEventListener("load", () => mark(image, image.naturalWidth > 0));
+    image.addEventListener("error", () => mark(image, false));
+  }
+}
+for (const video of document.querySelectorAll("video")) {
+  if (video.readyState >= 1) mark(video, video.videoWidth > 0);
+  else {
+    video.addEventListener("loadedmetadata", () => mark(video, video.videoWidth > 0));
+    video.addEventListener("error", () => mark(video, false));
+  }
+}
+</script>
+"""
+
+_STYLE = """
+<style>
+body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1200px; color: #222; }
+h1 { font-size: 1.5em; } h2 { margin-top: 2em; border-bottom: 1px solid #ccc; }
+table { border-collapse: collapse; font-size: 0.9em; }
+td, th { border: 1px solid #ddd; padding: 0.25em 0.6em; text-align: left; vertical-align: top; }
+img, video { max-width: 100%; }
+.settings { columns: 2; } .settings table { width: 100%; }
+.broken { color: #b00; font-weight: bold; }
+.success { color: #070; } .failure { color: #b00; }
+</style>
+"""
+
+
+@dataclasses.dataclass(frozen=True)
+class Report:
+    """What :func:`write_report` wrote."""
+
+    page: Path
+    assets: list[Path]
+
+
+def write_report(
+    run_dir: Path, episodes: int = 3, checkpoint: str = "latest", seed: int = 1_000_003, resolution: int = 60
+) -> Report:
+    """Render ``episodes`` episodes, draw the curves (and, for dtd on a Fetch block task, the
+    heatmaps after the first epoch and at ``checkpoint``) and write ``RUN/report.html``."""
+    from dtd.plots import draw
+    from dtd.render import render_run
+
+    run = RunDir(Path(run_dir))
+    config = read_config(run)
+    assets_dir = run.root / ASSETS
+    assets: list[Path] = []
+    sections = [_header(run, config), _settings(config)]
+
+    curve = read_curve(run.root)
+    if len(curve):
+        figures = draw(config.env or "", {config.algo.value: [curve]}, assets_dir / "curves")
+        assets += figures
+        picture = _image(figures[0], run.root, "eval success against epochs and env steps")
+        sections.append(_section("Training", picture))
+
+    if config.algo is Algo.dtd:
+        sections.append(_heatmap_section(run, checkpoint, resolution, assets))
+
+    rendered = render_run(run.root, episodes, assets_dir / "episodes", checkpoint, seed)
+    parts = []
+    for number, files in enumerate(rendered, start=1):
+        assets += [files.video, files.strip]
+        parts.append(
+            f"<h3>Episode {number}: {_outcome(files.plan['success'])}</h3>"
+            + _image(files.strip, run.root, f"key frames of episode {number}")
+            + f'<video controls preload="metadata" src="{_relative(files.video, run.root)}"></video>'
+        )
+    legend = "Red: the task's goal." + (" Green: the current sub-goal." if config.algo is Algo.dtd else "")
+    sections.append(_section("Episodes", f"<p>{legend}</p>" + "".join(parts)))
+    sections.append(_section("Plans", _plans_table([files.plan for files in rendered])))
+
+    title = f"{config.algo.value} on {config.env}: {run.root.name}"
+    page = run.root / "report.html"
+    body = "\n".join(sections)
+    write_text_atomic(
+        page,
+        f"<!doctype html>\n<html lang='en'><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+        f"{_STYLE}</head>\n<body>\n{body}\n{_MEDIA_CHECK}</body></html>\n",
+    )
+    return Report(page, assets)
+
+
+def _header(run: RunDir, config: Any) -> str:
+    curve = read_curve(run.root)
+    facts = {
+        "run directory": str(run.root.resolve()),
+        "task": config.env,
+        "algorithm": config.algo.value,
+        "preset": config.preset.value,
+        "seed": config.seed,
+        "epochs finished": len(curve),
+        "env steps": int(curve.env_steps[-1]) if len(curve) else 0,
+        "final eval success": f"{curve.final_success:.2f}" if len(curve) else "-",
+        "best eval success": f"{curve.eval_success.max():.2f}" if len(curve) else "-",
+        "training time": f"{curve.wall_s[-1] / 60:.1f} min" if len(curve) else "-",
+    }
+    versions = json.loads(run.config.read_text()).get("versions", {})
+    facts["versions"] = ", ".join(f"{name} {version}" for name, version in versions.items())
+    rows = "".join(
+        f"<tr><th>{html.escape(name)}</th><td>{html.escape(str(value))}</td></tr>"
+        for name, value in facts.items()
+    )
+    return f"<h1>{html.escape(config.algo.value)} on {html.escape(str(config.env))}</h1><table>{rows}</table>"
+
+
+def _settings(config: Any) -> str:
+    rows = "".join(
+        f"<tr><td>--{html.escape(name.replace('_', '-'))}</td><td>{html.escape(json.dumps(value))}</td></tr>"
+        for name, value in flat_items(config).items()
+    )
+    return _section("Configuration", f"<div class='settings'><table>{rows}</table></div>")
+
+
+def _heatmap_section(run: RunDir, checkpoint: str, resolution: int, assets: list[Path]) -> str:
+    from dtd.errors import EnvError
+    from dtd.heatmap import run_heatmaps
+
+    checkpoints = ("first", checkpoint) if run.first.exists() and checkpoint != "first" else (checkpoint,)
+    try:
+        path, _ = run_heatmaps(
+            run.root, run.root / ASSETS / "heatmaps.png", checkpoints, resolution=resolution
+        )
+    except EnvError as exc:
+        return _section(
+            "The high level's values", f"<p>No heatmap for this task: {html.escape(str(exc))}</p>"
+        )
+    assets.append(path)
+    text = (
+        "<p>The high level's critic Q1(o, g, sub-goal) for every sub-goal on a grid over the table, "
+        "with the block in one corner and the goal in the other; the cross marks the sub-goal the "
+        "agent would choose."
+        + (" Left: after the first epoch; right: at the checkpoint shown." if len(checkpoints) > 1 else "")
+        + "</p>"
+    )
+    picture = _image(path, run.root, "heatmaps of the high level's values")
+    return _section("The high level's values", text + picture)
+
+
+def _plans_table(plans: list[dict[str, Any]]) -> str:
+    def point(values: list[float]) -> str:
+        return "(" + ", ".join(f"{v:.3f}" for v in values) + ")"
+
+    head = "<tr><th>episode</th><th>start</th><th>sub-goals (reached at segment end)</th><th>goal</th>"
+    head += "<th>final</th><th>outcome</th></tr>"
+    rows = []
+    for number, plan in enumerate(plans, start=1):
+        steps = "<br>".join(
+            f"{n + 1}: {point(subgoal)} ({point(reached)})"
+            for n, (subgoal, reached) in enumerate(zip(plan["subgoals"], plan["reached"], strict=True))
+        )
+        cells = [str(number), point(plan["start"]), steps or "-", point(plan["goal"]), point(plan["final"])]
+        rows.append(
+            "<tr>"
+            + "".join(f"<td>{cell}</td>" for cell in cells)
+            + f"<td>{_outcome(plan['success'])}</td></tr>"
+        )
+    return f"<table>{head}{''.join(rows)}</table>"
+
+
+def _outcome(success: bool) -> str:
+    return "<span class='success'>success</span>" if success else "<span class='failure'>failure</span>"
+
+
+def _section(title: str, content: str) -> str:
+    return f"<h2>{html.escape(title)}</h2>\n{content}"
+
+
+def _image(path: Path, root: Path, alt: str) -> str:
+    return f'<p><img src="{_relative(path, root)}" alt="{html.escape(alt)}"></p>'
+
+
+def _relative(path: Path, root: Path) -> str:
+    return html.escape(Path(path).resolve().relative_to(root.resolve()).as_posix())
