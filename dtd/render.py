@@ -29,13 +29,15 @@ GHOST_SUBGOAL_RGBA = (0.1, 0.9, 0.1, 0.5)
 DOT_RADIUS = 0.025
 GHOST_HALF_SIZE = 0.025
 """Half the edge of the Hand task's block."""
-GHOST_BESIDE = np.array([0.0, -0.09, 0.0])
+GHOST_BESIDE = np.array([0.0, 0.09, 0.0])
 """Where the sub-goal's ghost block sits relative to the goal's, when the task ignores the
 block's position (the rotation tasks show the goal's ghost 15 cm beside the hand)."""
 FALLBACK_CAMERA = {"distance": 2.0, "azimuth": 135.0, "elevation": -20.0, "lookat": np.zeros(3)}
 TASK_CAMERAS = {
     # Closer than the environments' own default (2.5 m away): the table fills the frame.
     "Fetch": {"distance": 1.2, "azimuth": 160.0, "elevation": -35.0, "lookat": np.array([1.3, 0.75, 0.45])},
+    # A little further out than the default, so that the ghost blocks beside the hand fit.
+    "Hand": {"distance": 0.6, "azimuth": 55.0, "elevation": -25.0, "lookat": np.array([1.05, 0.93, 0.17])},
 }
 
 

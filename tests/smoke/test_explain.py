@@ -11,10 +11,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dtd.envs import make_env
+from dtd.envs import env_spec, make_env
 from dtd.heatmap import place_block_and_goal, run_heatmaps, table_of
 from dtd.hierarchy import DotToDotAgent
-from dtd.render import DOT_RADIUS, GOAL_RGBA, SUBGOAL_RGBA, Marker, SceneRenderer, camera_for, render_episode
+from dtd.render import (
+    DOT_RADIUS,
+    GHOST_BESIDE,
+    GOAL_RGBA,
+    SUBGOAL_RGBA,
+    Marker,
+    SceneRenderer,
+    camera_for,
+    goal_markers,
+    render_episode,
+)
 from dtd.runs import close_all, load_run
 from tests.helpers import TINY, dtd
 
@@ -171,3 +181,26 @@ def test_report_opens_in_a_browser_with_every_image_and_video_loaded(push_dtd_ru
     assert all('data-status="loaded"' in tag for tag in tags), tags
     text = page.read_text()
     assert "Configuration" in text and "Plans" in text and "--segments" in text
+
+
+def test_a_hand_subgoal_is_a_green_ghost_block_beside_the_goals():
+    name = "HandManipulateBlockRotateXYZ-v1"
+    env = make_env(name)
+    env.reset(seed=0)
+    spec = env_spec(env, name)
+    goal = np.array(env.unwrapped.goal)
+    subgoal = goal.copy()
+    subgoal[3:] = [0.5, 0.5, 0.5, 0.5]
+    (marker,) = goal_markers(env, spec, goal, subgoal)
+    np.testing.assert_allclose(marker.quaternion, [0.5, 0.5, 0.5, 0.5])
+    # The environment shows the goal's ghost 15 cm beside the hand; the sub-goal's sits next to it.
+    np.testing.assert_allclose(marker.position, goal[:3] + np.array([0.15, 0.0, 0.0]) + GHOST_BESIDE)
+    renderer = SceneRenderer(env, width=240, height=240, camera=camera_for(name))
+    try:
+        with_ghost, without = renderer.render([marker]), renderer.render([])
+        column, row = map(round, renderer.project(marker.position))
+        assert with_ghost[row, column, 1] > with_ghost[row, column, 0] + 50  # green over the ghost
+        assert not np.array_equal(with_ghost[row, column], without[row, column])
+    finally:
+        renderer.close()
+        env.close()
