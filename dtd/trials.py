@@ -12,6 +12,8 @@ import concurrent.futures
 import contextlib
 import dataclasses
 import multiprocessing
+import os
+import threading
 import time
 import traceback
 from collections.abc import Callable, Sequence
@@ -103,7 +105,9 @@ def run_local(
         raise ValueError(f"workers must be at least 1, got {workers}")
     outcomes: dict[int, TrialOutcome] = {}
     context = multiprocessing.get_context("spawn")
-    with concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+    with concurrent.futures.ProcessPoolExecutor(
+        max_workers=workers, mp_context=context, initializer=_exit_with_parent, initargs=(os.getpid(),)
+    ) as pool:
         futures = {pool.submit(run_trial, trial): index for index, trial in enumerate(trials)}
         pending = set(futures)
         while pending:
@@ -121,6 +125,19 @@ def run_local(
             if on_wait is not None:
                 on_wait()
     return [outcomes[index] for index in range(len(trials))]
+
+
+def _exit_with_parent(parent: int) -> None:
+    """In a pool's worker: end this process as soon as ``parent`` is gone, so that a killed
+    sweep leaves no trial training on (a sweep run again would resume the same run directory
+    in a second process)."""
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="exit-with-parent").start()
 
 
 def run_ray(

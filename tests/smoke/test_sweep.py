@@ -32,13 +32,25 @@ def tiny_config(**settings) -> TrainConfig:
     return TrainConfig(**{**tiny, **settings})
 
 
+def children(pid: int) -> list[int]:
+    """Processes whose parent is ``pid`` (Linux)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        try:
+            ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+        except (OSError, ValueError, IndexError):
+            continue
+        if ppid == pid:
+            found.append(int(entry.name))
+    return found
+
+
 def test_an_interrupted_sweep_run_again_skips_finished_trials_and_resumes_the_others(tmp_path):
     out = tmp_path / "sweep"
     process = subprocess.Popen(
         [sys.executable, "-m", "dtd", *SWEEP, "--workers", "1", "--out", str(out)],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
-        start_new_session=True,  # the sweep and its worker, killed together as by a scheduler
     )
     first, second = (out / name for name in NAMES[:2])
     deadline = time.monotonic() + 240
@@ -46,8 +58,14 @@ def test_an_interrupted_sweep_run_again_skips_finished_trials_and_resumes_the_ot
         assert process.poll() is None, "the sweep ended before it could be interrupted"
         assert time.monotonic() < deadline
         time.sleep(0.01)
-    os.killpg(process.pid, signal.SIGKILL)
+    workers = children(process.pid)
+    assert workers, "the sweep runs its trial in a process of its own"
+    os.kill(process.pid, signal.SIGKILL)  # the sweep alone: its worker must end with it
     process.wait()
+    deadline = time.monotonic() + 15
+    while any(Path(f"/proc/{pid}").exists() for pid in workers):
+        assert time.monotonic() < deadline, "a trial went on training after its sweep was killed"
+        time.sleep(0.1)
     interrupted_at = epochs_recorded(second)
     assert 1 <= interrupted_at < 3
     assert epochs_recorded(out / NAMES[2]) == 0
