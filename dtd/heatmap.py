@@ -118,25 +118,23 @@ def _centres(extent: tuple[float, float], count: int) -> np.ndarray:
 def draw_heatmaps(
     columns: Sequence[tuple[str, Sequence[Heatmap]]], table: Table, path: Path, title: str
 ) -> Path:
-    """One column of panels per checkpoint (label, slices), one row per height, as an image
-    (the format follows ``path``'s suffix)."""
+    """Panels of heatmaps (label, slices per checkpoint) as an image (the format follows
+    ``path``'s suffix)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    rows = max(len(slices) for _, slices in columns)
-    figure, axes = plt.subplots(
-        rows,
-        len(columns),
-        figsize=(5.2 * len(columns), 4.6 * rows + 0.6),
-        squeeze=False,
-        layout="constrained",
-    )
+    heights = max(len(slices) for _, slices in columns)
+    # One checkpoint: its slices side by side; several: a column each, a row per height.
+    single = len(columns) == 1
+    rows, wide = (1, heights) if single else (heights, len(columns))
+    size = (5.2 * wide, 4.6 * rows + 0.6)
+    figure, axes = plt.subplots(rows, wide, figsize=size, squeeze=False, layout="constrained")
     extent = (table.x[0], table.x[1], table.y[0], table.y[1])
     for column, (label, slices) in enumerate(columns):
         for row, heat in enumerate(slices):
-            axis = axes[row][column]
+            axis = axes[0][row] if single else axes[row][column]
             image = axis.imshow(heat.values, origin="lower", extent=extent, cmap="viridis", aspect="equal")
             figure.colorbar(image, ax=axis, shrink=0.85, label="high-level value Q1(o, g, sub-goal)")
             axis.plot(*heat.start[:2], "s", color="black", markersize=9, label="block")
@@ -149,8 +147,8 @@ def draw_heatmaps(
             axis.set_ylabel("y (m, world frame)")
             axis.set_title(f"{label}\nsub-goals at z = {heat.z:.3f} m", fontsize=10)
             axis.legend(loc="upper left", fontsize=7, framealpha=0.8)
-        for row in range(len(slices), rows):
-            axes[row][column].set_axis_off()
+        for row in range(len(slices), heights):
+            (axes[0][row] if single else axes[row][column]).set_axis_off()
     figure.suptitle(title, fontsize=11)
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(path, dpi=110)
