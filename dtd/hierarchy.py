@@ -18,7 +18,7 @@ from dtd.exploration import ActionNoise
 from dtd.her import sample_transitions
 from dtd.networks import SubgoalHead
 from dtd.records import Batch, Episodes
-from dtd.segments import high_level_input, sample_segment_transitions
+from dtd.segments import episode_plan, high_level_input, sample_segment_transitions
 
 
 @dataclasses.dataclass(frozen=True)
@@ -220,18 +220,7 @@ class DotToDotAgent:
 
     def plan(self, episodes: Episodes) -> list[dict[str, Any]]:
         """Per episode: the start, each segment's sub-goal and what was reached, the goal."""
-        plans = []
-        for i in range(episodes.count):
-            plans.append(
-                {
-                    "start": episodes.achieved_goal[i, 0].tolist(),
-                    "subgoals": episodes.step_goal[i, self.bounds[:-1]].tolist(),
-                    "reached": episodes.achieved_goal[i, self.bounds[1:]].tolist(),
-                    "goal": episodes.desired_goal[i].tolist(),
-                    "success": bool(episodes.success[i]),
-                }
-            )
-        return plans
+        return [episode_plan(episodes, index, self.bounds) for index in range(episodes.count)]
 
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
         state: dict[str, Any] = {"low": self.low.state_dict(), "high": self.high.state_dict()}

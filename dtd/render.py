@@ -22,6 +22,7 @@ from dtd.agent import Agent
 from dtd.envs import EnvSpec
 from dtd.records import Episodes
 from dtd.rollout import run_episodes
+from dtd.segments import episode_plan
 
 GOAL_RGBA = (0.9, 0.05, 0.05, 1.0)
 SUBGOAL_RGBA = (0.05, 0.85, 0.05, 1.0)
@@ -239,23 +240,6 @@ def write_strip(episode: RenderedEpisode, path: Path, title: str) -> Path:
     return path
 
 
-def plan_of(episode: Episodes, bounds: np.ndarray | None) -> dict[str, Any]:
-    """Start, sub-goals with what was reached at each segment's end, goal and success."""
-    achieved = episode.achieved_goal[0]
-    plan: dict[str, Any] = {
-        "start": achieved[0].tolist(),
-        "goal": episode.desired_goal[0].tolist(),
-        "final": achieved[-1].tolist(),
-        "success": bool(episode.success[0]),
-        "subgoals": [],
-        "reached": [],
-    }
-    if bounds is not None:
-        plan["subgoals"] = episode.step_goal[0, bounds[:-1]].tolist()
-        plan["reached"] = achieved[bounds[1:]].tolist()
-    return plan
-
-
 @dataclasses.dataclass(frozen=True)
 class RenderedFiles:
     """What :func:`render_run` wrote for one episode, and the episode's plan."""
@@ -305,7 +289,7 @@ def render_run(
                 RenderedFiles(
                     write_video(rendered.frames, Path(out) / f"{name}.mp4"),
                     write_strip(rendered, Path(out) / f"{name}-keyframes.png", title),
-                    plan_of(rendered.episode, bounds),
+                    episode_plan(rendered.episode, 0, bounds),
                 )
             )
     finally:

@@ -7,6 +7,8 @@ the last segment's being the task's goal.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from dtd.envs import RewardFn
@@ -106,3 +108,17 @@ def sample_segment_transitions(
         next_action=goal,
         next_action_given=segment + 1 >= segments - 1,
     )
+
+
+def episode_plan(episodes: Episodes, index: int, bounds: np.ndarray | None) -> dict[str, Any]:
+    """Episode ``index``'s plan: the start, each segment's sub-goal and what was reached at the
+    segment's end (none without ``bounds``), the goal, the final achieved goal, success."""
+    achieved = episodes.achieved_goal[index]
+    return {
+        "start": achieved[0].tolist(),
+        "subgoals": [] if bounds is None else episodes.step_goal[index, bounds[:-1]].tolist(),
+        "reached": [] if bounds is None else achieved[bounds[1:]].tolist(),
+        "goal": episodes.desired_goal[index].tolist(),
+        "final": achieved[-1].tolist(),
+        "success": bool(episodes.success[index]),
+    }
