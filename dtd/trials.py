@@ -155,7 +155,7 @@ def run_ray(
     for as many CPUs as its trial has torch threads, so Ray places no more trials on a node
     than it has cores. Run directories must lie where every node can reach them.
     """
-    ray = _import_ray()
+    ray = import_ray()
     started_here = not ray.is_initialized()
     if started_here:
         _init_ray(ray, address)
@@ -185,7 +185,8 @@ def run_ray(
             ray.shutdown()
 
 
-def _import_ray():
+def import_ray():
+    """The ray module, or a :class:`DtdError` that says how to install it."""
     try:
         import ray
     except ImportError as exc:

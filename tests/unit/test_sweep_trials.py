@@ -1,0 +1,56 @@
+"""Sweep trials: names, order, validation; how trials share the cores."""
+
+import sys
+
+import pytest
+
+from dtd.config import Algo, Collection, TrainConfig
+from dtd.errors import ConfigError, DtdError
+from dtd.sweep import sweep_trials, workers_for
+from dtd.trials import Trial, import_ray, sharing_cores
+
+
+def test_trials_are_ordered_seed_by_seed_from_the_first_seed(tmp_path):
+    trials = sweep_trials(TrainConfig(env="FetchPush-v4", seed=3), [Algo.her, Algo.dtd], 2, tmp_path / "out")
+    assert [t.name for t in trials] == [
+        "FetchPush-v4-her-s3", "FetchPush-v4-dtd-s3", "FetchPush-v4-her-s4", "FetchPush-v4-dtd-s4",
+    ]  # fmt: skip
+    assert [(t.config.algo, t.config.seed) for t in trials][1] == (Algo.dtd, 3)
+    assert all(t.run_dir.is_absolute() and t.run_dir.parent == (tmp_path / "out").resolve() for t in trials)
+
+
+@pytest.mark.parametrize(
+    ("algos", "seeds", "message"),
+    [([], 1, "no algorithm"), ([Algo.her, Algo.her], 1, "twice"), ([Algo.her], 0, "--seeds")],
+)
+def test_bad_sweeps_are_refused(tmp_path, algos, seeds, message):
+    with pytest.raises(ConfigError, match=message):
+        sweep_trials(TrainConfig(env="FetchPush-v4"), algos, seeds, tmp_path)
+    with pytest.raises(ConfigError, match="--env"):
+        sweep_trials(TrainConfig(), [Algo.her], 1, tmp_path)
+
+
+def test_trials_running_together_share_the_cores():
+    config = TrainConfig(env="FetchPush-v4")
+    shared = sharing_cores(config, workers=2, cores=8)
+    assert (shared.threads, shared.collector) == (4, Collection.inline)
+    assert sharing_cores(config, workers=3, cores=2).threads == 1
+    assert sharing_cores(config, workers=1, cores=8) == config  # one trial: chosen as for dtd train
+    given = TrainConfig(env="FetchPush-v4", threads=3, collector=Collection.process)
+    assert sharing_cores(given, workers=2, cores=8) == given  # what the user set is kept
+
+
+def test_workers_default_to_one_per_core_but_no_more_than_trials(tmp_path, monkeypatch):
+    monkeypatch.setattr("dtd.sweep.usable_cores", lambda: 4)
+    trials = [Trial(TrainConfig(env="FetchReach-v4"), tmp_path / str(n)) for n in range(3)]
+    assert workers_for(trials, 0) == 3
+    assert workers_for(trials * 2, 0) == 4
+    assert workers_for(trials, 2) == 2
+    with pytest.raises(ConfigError):
+        workers_for(trials, -1)
+
+
+def test_without_ray_the_error_says_how_to_install_it(monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)
+    with pytest.raises(DtdError, match=r"pip install 'dtd\[ray\]'"):
+        import_ray()
