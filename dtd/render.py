@@ -178,12 +178,9 @@ def render_episode(
     frames: list[np.ndarray] = []
     goal_pixels: list[tuple[float, float]] = []
     subgoal_pixels: list[tuple[float, float] | None] = []
-    goal_box: dict[str, np.ndarray] = {}
 
     def on_step(t: int, goals: np.ndarray) -> None:
-        if "goal" not in goal_box:
-            goal_box["goal"] = np.asarray(env.unwrapped.goal, dtype=np.float64).copy()
-        goal = goal_box["goal"]
+        goal = np.array(env.unwrapped.goal, dtype=np.float64)  # the task's goal, set at reset
         subgoal = goals[0] if bounds is not None else None
         markers = goal_markers(env, spec, goal, subgoal)
         frames.append(renderer.render(markers))
