@@ -16,6 +16,11 @@ SMOOTHING = 3
 one epoch's 10 evaluation episodes reach 0.5 by chance long before the policy does."""
 
 
+LEVEL_TOLERANCE = 1e-9
+"""A level counts as met by a mean that rounding put just below it (success rates are
+multiples of one over the number of test episodes)."""
+
+
 @dataclasses.dataclass(frozen=True)
 class Curve:
     """One run's per-epoch figures, in epoch order."""
@@ -37,15 +42,14 @@ class Curve:
         the start)."""
         if window < 1:
             raise ValueError(f"window must be at least 1, got {window}")
-        sums = np.cumsum(np.concatenate([[0.0], self.eval_success]))
-        ends = np.arange(1, len(self) + 1)
-        starts = np.maximum(ends - window, 0)
-        return (sums[ends] - sums[starts]) / (ends - starts)
+        # Each window summed on its own: a running sum's differences drift (0.9 became 0.8999...).
+        values = self.eval_success
+        return np.array([values[max(end - window, 0) : end].mean() for end in range(1, len(self) + 1)])
 
     def first_reaching(self, level: float, window: int = SMOOTHING) -> tuple[int, float] | None:
         """(env steps, wall seconds) at the first epoch whose smoothed eval success is at
         least ``level``; None if it never is."""
-        reached = np.flatnonzero(self.smoothed(window) >= level)
+        reached = np.flatnonzero(self.smoothed(window) >= level - LEVEL_TOLERANCE)
         if len(reached) == 0:
             return None
         first = reached[0]

@@ -39,3 +39,11 @@ def test_read_curve_from_a_metrics_file(tmp_path):
     np.testing.assert_allclose(c.eval_success, [0.1, 0.4])
     with pytest.raises(RunDirError):
         read_curve(tmp_path / "absent")
+
+
+def test_a_level_met_exactly_counts_after_a_long_history():
+    # 57 epochs of history, then 1.0, 0.8, 0.9: the mean is 0.9 and meets 0.9.
+    history = [0.1, 0.3, 0.7] * 19
+    c = curve([*history, 1.0, 0.8, 0.9])
+    assert c.smoothed(3)[-1] == pytest.approx(0.9)
+    assert c.first_reaching(0.9, window=3) == (60 * 5000, 60 * 30.0)
