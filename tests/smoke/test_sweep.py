@@ -20,7 +20,11 @@ from tests.helpers import TINY, dtd, read_metrics
 
 pytestmark = pytest.mark.smoke
 
-SWEEP = ["sweep", "--env", "FetchReach-v4", "--algos", "her,dtd", "--seeds", "2", "--epochs", "3", *TINY]
+EPOCHS = 8
+"""Enough that a trial killed after its first epoch cannot finish in the moment (up to a
+quarter second) its worker takes to notice."""
+SWEEP = ["sweep", "--env", "FetchReach-v4", "--algos", "her,dtd", "--seeds", "2", "--epochs", str(EPOCHS)]
+SWEEP += TINY
 NAMES = ["FetchReach-v4-her-s0", "FetchReach-v4-dtd-s0", "FetchReach-v4-her-s1", "FetchReach-v4-dtd-s1"]
 """The order a one-worker sweep runs its trials in."""
 
@@ -54,7 +58,7 @@ def test_an_interrupted_sweep_run_again_skips_finished_trials_and_resumes_the_ot
     )
     first, second = (out / name for name in NAMES[:2])
     deadline = time.monotonic() + 240
-    while not (epochs_recorded(first) == 3 and epochs_recorded(second) >= 1):
+    while not (epochs_recorded(first) == EPOCHS and epochs_recorded(second) >= 1):
         assert process.poll() is None, "the sweep ended before it could be interrupted"
         assert time.monotonic() < deadline
         time.sleep(0.01)
@@ -67,7 +71,7 @@ def test_an_interrupted_sweep_run_again_skips_finished_trials_and_resumes_the_ot
         assert time.monotonic() < deadline, "a trial went on training after its sweep was killed"
         time.sleep(0.1)
     interrupted_at = epochs_recorded(second)
-    assert 1 <= interrupted_at < 3
+    assert 1 <= interrupted_at < EPOCHS
     assert epochs_recorded(out / NAMES[2]) == 0
     finished = (first / "metrics.csv", first / "checkpoints" / "latest.pt")
     finished_files = {path: path.stat().st_mtime_ns for path in finished}
@@ -76,18 +80,18 @@ def test_an_interrupted_sweep_run_again_skips_finished_trials_and_resumes_the_ot
     result = dtd(*SWEEP, "--workers", "2", "--out", out)
     assert result.returncode == 0, result.stderr
     assert "4 of 4 trials finished" in result.stdout
-    assert all(epochs_recorded(out / name) == 3 for name in NAMES)
+    assert all(epochs_recorded(out / name) == EPOCHS for name in NAMES)
     # Nothing finished is redone, nothing done is lost.
     assert {path: path.stat().st_mtime_ns for path in finished_files} == finished_files
     assert read_metrics(second)[:interrupted_at] == rows_before
     # The summary table covers both algorithms, over both seeds.
     lines = [line.split() for line in result.stdout.splitlines()]
-    assert ["FetchReach-v4", "her", "2", "3"] in [line[:4] for line in lines]
-    assert ["FetchReach-v4", "dtd", "2", "3"] in [line[:4] for line in lines]
+    assert ["FetchReach-v4", "her", "2", str(EPOCHS)] in [line[:4] for line in lines]
+    assert ["FetchReach-v4", "dtd", "2", str(EPOCHS)] in [line[:4] for line in lines]
 
     again = dtd(*SWEEP, "--workers", "2", "--out", out)
     assert again.returncode == 0, again.stderr
-    assert [read_metrics(out / name)[-1]["epoch"] for name in NAMES] == ["3"] * 4
+    assert [read_metrics(out / name)[-1]["epoch"] for name in NAMES] == [str(EPOCHS)] * 4
 
 
 def test_a_failing_trial_is_reported_and_the_others_finish(tmp_path):
