@@ -15,7 +15,7 @@ from typing import Any
 
 from dtd.atomic import write_text_atomic
 from dtd.config import Algo, flat_items
-from dtd.curves import read_curve
+from dtd.curves import Curve, read_curve
 from dtd.run_dir import RunDir, read_config
 
 ASSETS = "report"
@@ -84,9 +84,9 @@ def write_report(
     config = read_config(run)
     assets_dir = run.root / ASSETS
     assets: list[Path] = []
-    sections = [_header(run, config), _settings(config)]
-
     curve = read_curve(run.root)
+    sections = [_header(run, config, curve), _settings(config)]
+
     if len(curve):
         figures = draw(config.env or "", {config.algo.value: [curve]}, assets_dir / "curves")
         assets += figures
@@ -120,8 +120,7 @@ def write_report(
     return Report(page, assets)
 
 
-def _header(run: RunDir, config: Any) -> str:
-    curve = read_curve(run.root)
+def _header(run: RunDir, config: Any, curve: Curve) -> str:
     facts = {
         "run directory": str(run.root.resolve()),
         "task": config.env,
