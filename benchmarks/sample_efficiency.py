@@ -1,9 +1,11 @@
 """Sample efficiency: N seeds of one algorithm on one task, and how soon they learn.
 
 Trains seeds 0..N-1 (in parallel where cores allow; a run left unfinished in ``--out``
-resumes, a finished one is only read) and prints, per seed and as median [min, max], the env
-steps and wall time at which eval success first reached 0.5 and 0.9 (averaged over 3
-epochs, see ``dtd.curves.SMOOTHING``) and the final eval success. A benchmark, not a test.
+resumes, a finished one is only read; the run directories are named as ``dtd sweep`` names
+them, <env>-<algo>-s<seed>, so a sweep's directory serves as ``--out``) and prints, per seed
+and as median [min, max], the env steps and wall time at which eval success first reached 0.5
+and 0.9 (averaged over 3 epochs, see ``dtd.curves.SMOOTHING``) and the final eval success.
+A benchmark, not a test.
 
     python benchmarks/sample_efficiency.py --env FetchPush-v4 --algo her --seeds 3 \
         --steps 200000 --out runs/se-push-her
@@ -20,6 +22,7 @@ import numpy as np
 from dtd.config import Algo, Preset, preset_config, with_settings
 from dtd.curves import SMOOTHING, Curve, read_curve
 from dtd.runs import epochs_for_steps, usable_cores
+from dtd.sweep import trial_name
 from dtd.trials import Trial, TrialOutcome, run_local, sharing_cores
 
 LEVELS = (0.5, 0.9)
@@ -51,8 +54,8 @@ def main() -> None:
     base = sharing_cores(base, workers, cores)
     base = with_settings(base, [f"epochs={epochs_for_steps(base, args.steps)}"])
     trials = [
-        Trial(with_settings(base, [f"seed={seed}"]), args.out / f"{args.algo}-s{seed}")
-        for seed in range(args.seeds)
+        Trial(config, args.out / trial_name(config))
+        for config in (with_settings(base, [f"seed={seed}"]) for seed in range(args.seeds))
     ]
 
     def done(outcome: TrialOutcome) -> None:
@@ -72,7 +75,7 @@ def summary(curves: dict[str, Curve]) -> str:
     """One line per run and the median [min, max] over runs."""
     heads = [f"steps to {level}" for level in LEVELS] + [f"wall to {level}" for level in LEVELS]
     lines = [
-        f"{'run':<14} " + " ".join(f"{h:>16}" for h in heads) + f" {'final':>6} {'steps':>8} {'wall':>7}"
+        f"{'run':<22} " + " ".join(f"{h:>16}" for h in heads) + f" {'final':>6} {'steps':>8} {'wall':>7}"
     ]
     table: dict[str, list[float]] = {h: [] for h in heads}
     finals, walls = [], []
@@ -88,11 +91,11 @@ def summary(curves: dict[str, Curve]) -> str:
         finals.append(curve.final_success)
         walls.append(float(curve.wall_s[-1]) if len(curve) else 0.0)
         steps = int(curve.env_steps[-1]) if len(curve) else 0
-        lines.append(f"{name:<14} " + " ".join(cells) + f" {finals[-1]:>6.2f} {steps:>8} {walls[-1]:>6.0f}s")
+        lines.append(f"{name:<22} " + " ".join(cells) + f" {finals[-1]:>6.2f} {steps:>8} {walls[-1]:>6.0f}s")
     if len(curves) > 1:
         cells = [f"{_median_range(np.array(table[head])):>16}" for head in heads]
         lines.append(
-            f"{'median [range]':<14} "
+            f"{'median [range]':<22} "
             + " ".join(cells)
             + f" {np.median(finals):>6.2f} {'':>8} {np.median(walls):>6.0f}s"
         )

@@ -23,12 +23,13 @@ from dtd.runs import resumed_config
 VALID = TrainConfig(env="FetchReach-v4")
 
 
-def test_defaults_are_the_reference_settings():
+def test_defaults_are_the_reference_settings_but_where_tuned():
     c = TrainConfig()
     assert (c.n_cycles, c.episodes_per_cycle, c.updates_per_cycle, c.test_episodes) == (50, 2, 40, 10)
     assert (c.buffer_size, c.replay_k, c.noise_eps, c.random_eps) == (1_000_000, 4, 0.2, 0.3)
     learner = c.learner
-    assert learner.hidden_sizes == (256, 256, 256) and learner.batch_size == 256
+    assert learner.hidden_sizes == (256, 256, 256) and learner.batch_size == 1024
+    assert c.high.batch_size == 256
     assert (learner.actor_lr, learner.critic_lr, learner.polyak, learner.action_l2) == (1e-3, 1e-3, 0.95, 1.0)
     assert (learner.norm_clip, learner.obs_clip, learner.norm_eps) == (5.0, 200.0, 0.01)
     assert learner.gamma is None and learner.clip_return
