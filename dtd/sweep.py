@@ -8,6 +8,7 @@ finished trials alone and resumes interrupted ones (:mod:`dtd.trials`).
 from __future__ import annotations
 
 import dataclasses
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -52,13 +53,29 @@ def workers_for(trials: Sequence[Trial], workers: int) -> int:
     return workers or max(1, min(len(trials), usable_cores()))
 
 
+LOG_LINE_EVERY_S = 60.0
+"""Without a terminal (output sent to a log file) a status line replaces the bar, at most this
+often and only when epochs were added."""
+
+
 class SweepProgress:
     """A progress bar over all the sweep's epochs, read from the run directories, and a line
-    per trial as it ends."""
+    per trial as it ends; without a terminal, a plain status line now and then instead of the
+    bar."""
 
-    def __init__(self, trials: Sequence[Trial], enabled: bool) -> None:
+    def __init__(
+        self,
+        trials: Sequence[Trial],
+        enabled: bool,
+        console: Console | None = None,
+        log_every_s: float = LOG_LINE_EVERY_S,
+    ) -> None:
         self.trials = trials
-        self.console = Console(stderr=True)
+        self.console = console or Console(stderr=True)
+        self.log_lines = enabled and not self.console.is_terminal
+        self.log_every_s = log_every_s
+        self.started = time.monotonic()
+        self.last_line = (-float("inf"), 0)
         self.progress = Progress(
             TextColumn("[bold]sweep"),
             BarColumn(),
@@ -66,10 +83,10 @@ class SweepProgress:
             TextColumn("epochs, {task.fields[done]} of {task.fields[trials]} trials ended"),
             TimeElapsedColumn(),
             console=self.console,
-            disable=not enabled,
+            disable=not enabled or self.log_lines,
         )
-        total = sum(trial.config.epochs for trial in trials)
-        self.task = self.progress.add_task("sweep", total=total, done=0, trials=len(trials))
+        self.total = sum(trial.config.epochs for trial in trials)
+        self.task = self.progress.add_task("sweep", total=self.total, done=0, trials=len(trials))
         self.ended = 0
 
     def __enter__(self) -> SweepProgress:
@@ -84,6 +101,15 @@ class SweepProgress:
     def refresh(self) -> None:
         epochs = sum(min(epochs_recorded(t.run_dir), t.config.epochs) for t in self.trials)
         self.progress.update(self.task, completed=epochs, done=self.ended)
+        now = time.monotonic()
+        if self.log_lines and epochs > self.last_line[1] and now - self.last_line[0] >= self.log_every_s:
+            self.last_line = (now, epochs)
+            minutes = (now - self.started) / 60
+            self.console.print(
+                f"sweep: {epochs}/{self.total} epochs, {self.ended} of {len(self.trials)} trials ended, "
+                f"{minutes:.0f} min",
+                highlight=False,
+            )
 
     def trial_ended(self, outcome: TrialOutcome) -> None:
         self.ended += 1

@@ -1,12 +1,14 @@
 """Sweep trials: names, order, validation; how trials share the cores."""
 
+import io
 import sys
 
 import pytest
+from rich.console import Console
 
 from dtd.config import Algo, Collection, TrainConfig
 from dtd.errors import ConfigError, DtdError
-from dtd.sweep import sweep_trials, workers_for
+from dtd.sweep import SweepProgress, sweep_trials, workers_for
 from dtd.trials import Trial, import_ray, sharing_cores
 
 
@@ -54,3 +56,29 @@ def test_without_ray_the_error_says_how_to_install_it(monkeypatch):
     monkeypatch.setitem(sys.modules, "ray", None)
     with pytest.raises(DtdError, match=r"pip install 'dtd\[ray\]'"):
         import_ray()
+
+
+def test_without_a_terminal_a_status_line_replaces_the_bar(tmp_path, monkeypatch):
+    recorded = {}
+    monkeypatch.setattr("dtd.sweep.epochs_recorded", lambda run_dir: recorded.get(run_dir, 0))
+    trials = [Trial(TrainConfig(env="FetchReach-v4", epochs=4), tmp_path / str(n)) for n in range(2)]
+    log = io.StringIO()
+    progress = SweepProgress(
+        trials, enabled=True, console=Console(file=log, force_terminal=False), log_every_s=0
+    )
+    with progress:
+        recorded[trials[0].run_dir] = 3
+        progress.refresh()
+        progress.refresh()  # nothing new: no second line
+        recorded[trials[1].run_dir] = 9  # more than the trial asks for counts as its 4
+        progress.refresh()
+    lines = log.getvalue().splitlines()
+    assert lines == [
+        "sweep: 3/8 epochs, 0 of 2 trials ended, 0 min",
+        "sweep: 7/8 epochs, 0 of 2 trials ended, 0 min",
+    ]
+
+    terminal = io.StringIO()
+    with SweepProgress(trials, enabled=True, console=Console(file=terminal, force_terminal=True)) as bar:
+        bar.refresh()
+    assert "sweep:" not in terminal.getvalue()
