@@ -12,7 +12,7 @@ from dtd.ddpg import DDPGLearner
 from dtd.envs import RewardFn
 from dtd.exploration import ActionNoise
 from dtd.her import GoalStrategy, relabel_probability, sample_transitions
-from dtd.records import Episodes
+from dtd.records import Batch, Episodes
 
 
 class Agent(Protocol):
@@ -41,6 +41,11 @@ class Agent(Protocol):
     def train(self, updates: int, rng: np.random.Generator) -> dict[str, float]:
         """Run ``updates`` gradient steps (then move the targets) and return mean diagnostics."""
         ...
+
+    def _batch(self, episodes: Episodes, size: int, rng: np.random.Generator) -> Batch:
+        return sample_transitions(
+            episodes, size, rng, self.relabel_prob, self.reward_fn, past_share=self.past_share
+        )
 
     def episode_metrics(self, episodes: Episodes) -> dict[str, float]:
         """Figures of collected episodes that only this kind of agent has (may be empty)."""
@@ -85,12 +90,14 @@ class GoalConditionedAgent:
         noise: ActionNoise,
         strategy: GoalStrategy,
         replay_k: int,
+        past_share: float = 0.0,
     ) -> None:
         self.learner = learner
         self.buffer = buffer
         self.reward_fn = reward_fn
         self.noise = noise
         self.relabel_prob = relabel_probability(strategy, replay_k)
+        self.past_share = past_share
 
     def step_goal(
         self,
@@ -110,24 +117,20 @@ class GoalConditionedAgent:
     def store(self, episodes: Episodes, rng: np.random.Generator) -> None:
         self.buffer.add(episodes)
         # Normalise with the goals the learner will be trained on, relabelled ones included.
-        sample = sample_transitions(
-            episodes,
-            episodes.action.size // episodes.action.shape[-1],
-            rng,
-            self.relabel_prob,
-            self.reward_fn,
-        )
+        sample = self._batch(episodes, episodes.action.size // episodes.action.shape[-1], rng)
         self.learner.update_normalizers(sample.obs, sample.goal)
 
     def train(self, updates: int, rng: np.random.Generator) -> dict[str, float]:
         stored = self.buffer.stored()
         size = self.learner.config.batch_size
-        metrics = mean_metrics(
-            self.learner.update(sample_transitions(stored, size, rng, self.relabel_prob, self.reward_fn))
-            for _ in range(updates)
-        )
+        metrics = mean_metrics(self.learner.update(self._batch(stored, size, rng)) for _ in range(updates))
         self.learner.update_target()
         return metrics
+
+    def _batch(self, episodes: Episodes, size: int, rng: np.random.Generator) -> Batch:
+        return sample_transitions(
+            episodes, size, rng, self.relabel_prob, self.reward_fn, past_share=self.past_share
+        )
 
     def episode_metrics(self, episodes: Episodes) -> dict[str, float]:
         return {}

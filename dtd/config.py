@@ -130,6 +130,9 @@ class TrainConfig:
     """Replay capacity in transitions (whole episodes are kept)."""
     replay_k: int = 4
     """HER: relabelled goals per original one; a fraction k/(k+1) of samples is relabelled."""
+    past_goal_share: float = 0.0
+    """HER: share of the relabelled goals that are goals given before (of a random stored
+    step, any episode) instead of goals achieved later in the episode."""
     noise_eps: float = 0.2
     """Exploration: std of Gaussian action noise, as a fraction of the largest action."""
     random_eps: float = 0.3
@@ -192,6 +195,10 @@ class TrainConfig:
             ),
             (self.buffer_size >= 1, f"--buffer-size must be at least 1, got {self.buffer_size}"),
             (self.replay_k >= 0, f"--replay-k must be 0 or more, got {self.replay_k}"),
+            (
+                _finite_in(self.past_goal_share, 0, 1),
+                f"--past-goal-share must lie in [0, 1], got {self.past_goal_share}",
+            ),
             (_finite_in(self.noise_eps, 0, math.inf), f"--noise-eps must be >= 0, got {self.noise_eps}"),
             (
                 _finite_in(self.random_eps, 0, 1),
@@ -313,6 +320,7 @@ PAPER_SETTINGS: dict[str, Any] = {
     "test_episodes": 10,
     "buffer_size": 1_000_000,
     "replay_k": 4,
+    "past_goal_share": 0.0,
     "noise_eps": 0.2,
     "random_eps": 0.3,
     "learner.hidden_sizes": [256, 256, 256],

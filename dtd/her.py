@@ -43,11 +43,14 @@ def sample_transitions(
     relabel_prob: float,
     reward_fn: RewardFn,
     window_end: np.ndarray | None = None,
+    past_share: float = 0.0,
 ) -> Batch:
     """Sample transitions uniformly over stored steps, relabel goals, recompute rewards.
 
     ``window_end[t]`` bounds how far ahead the relabelled goal of step t may come from
-    (default: the episode's end).
+    (default: the episode's end). A share ``past_share`` of the relabelled transitions takes
+    instead the goal of a random stored step, of any episode: a goal given before, a likely
+    goal of the task (mrl's ``actual`` goals).
     """
     count, horizon = episodes.action.shape[:2]
     episode = rng.integers(0, count, size=batch_size)
@@ -59,6 +62,11 @@ def sample_transitions(
     future = future_indices(t, end, uniform)
     goal = episodes.step_goal[episode, t].copy()
     goal[relabel] = episodes.achieved_goal[episode[relabel], future[relabel]]
+    if past_share > 0.0:
+        past = relabel & (rng.random(batch_size) < past_share)
+        past_episode = rng.integers(0, count, size=batch_size)[past]
+        past_t = rng.integers(0, horizon, size=batch_size)[past]
+        goal[past] = episodes.step_goal[past_episode, past_t]
     # The reward of step t is earned by the goal it reached: the next achieved goal.
     reward = reward_fn(episodes.achieved_goal[episode, t + 1], goal)
     return Batch(

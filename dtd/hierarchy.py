@@ -72,6 +72,7 @@ class DotToDotAgent:
         high_relabel_prob: float,
         hindsight_action_prob: float,
         high_updates: int,
+        low_past_share: float = 0.0,
     ) -> None:
         if not isinstance(high.head, SubgoalHead):
             raise TypeError("the high level's learner must propose sub-goals (a SubgoalHead)")
@@ -85,6 +86,7 @@ class DotToDotAgent:
         self.exploration = exploration
         self.low_relabel_prob = low_relabel_prob
         self.low_window_end = low_window_end
+        self.low_past_share = low_past_share
         self.high_relabel_prob = high_relabel_prob
         self.hindsight_action_prob = hindsight_action_prob
         self.high_updates = high_updates
@@ -162,7 +164,13 @@ class DotToDotAgent:
 
     def _low_batch(self, episodes: Episodes, size: int, rng: np.random.Generator) -> Batch:
         return sample_transitions(
-            episodes, size, rng, self.low_relabel_prob, self.reward_fn, self.low_window_end
+            episodes,
+            size,
+            rng,
+            self.low_relabel_prob,
+            self.reward_fn,
+            self.low_window_end,
+            self.low_past_share,
         )
 
     def _high_batch(self, episodes: Episodes, size: int, rng: np.random.Generator) -> Batch:

@@ -63,7 +63,9 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env) -> Agent:
     reward_fn = reward_function(env)
     if config.algo is not Algo.dtd:
         strategy = GoalStrategy.future if config.algo is Algo.her else GoalStrategy.none
-        return GoalConditionedAgent(low, buffer, reward_fn, noise, strategy, config.replay_k)
+        return GoalConditionedAgent(
+            low, buffer, reward_fn, noise, strategy, config.replay_k, config.past_goal_share
+        )
 
     if config.segments > spec.horizon:
         raise ConfigError(f"--segments must be at most the horizon ({spec.horizon}), got {config.segments}")
@@ -93,6 +95,7 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env) -> Agent:
         exploration=SubgoalExploration(schedule, config.subgoal_sigma, config.subgoal_noise),
         low_relabel_prob=relabel_probability(GoalStrategy.future, config.replay_k),
         low_window_end=window,
+        low_past_share=config.past_goal_share,
         high_relabel_prob=relabel_probability(GoalStrategy.future, config.high_replay_k),
         hindsight_action_prob=config.hindsight_action_prob,
         high_updates=config.high_updates_per_cycle,

@@ -95,6 +95,31 @@ def test_window_bounds_relabelled_goals():
     assert np.any(batch.goal[~first_half, 1] > 5)
 
 
+def test_a_share_of_relabelled_goals_are_goals_given_in_any_stored_episode():
+    count = 20
+    episodes = labelled_episodes(count)
+    batch = sample_transitions(episodes, 20_000, np.random.default_rng(4), 0.8, exact_reward, past_share=0.5)
+    episode_of_obs = batch.obs[:, 0] / 10
+    given = batch.goal[:, 2] == 1  # a desired goal, of this episode or of another
+    future = ~given
+    assert 0.38 < future.mean() < 0.42
+    # Every given goal is one stored, of the episode it names.
+    assert np.array_equal(batch.goal[given], episodes.desired_goal[batch.goal[given, 0].astype(int)])
+    # 0.2 keep their own goal; 0.4 take a random episode's, another's in 19 cases of 20.
+    other = given & (batch.goal[:, 0] != episode_of_obs)
+    assert 0.36 < other.mean() < 0.40
+    # Future goals still come from later in the same episode.
+    assert np.all(batch.goal[future, 0] == episode_of_obs[future])
+    assert np.all(batch.goal[future, 1] > batch.obs[future, 1] / 10)
+
+
+def test_without_a_past_share_the_samples_are_those_of_plain_her():
+    episodes = labelled_episodes()
+    plain = sample_transitions(episodes, 500, np.random.default_rng(5), 0.8, exact_reward)
+    zero = sample_transitions(episodes, 500, np.random.default_rng(5), 0.8, exact_reward, past_share=0.0)
+    assert np.array_equal(plain.goal, zero.goal) and np.array_equal(plain.obs, zero.obs)
+
+
 @pytest.mark.parametrize(("k", "p"), [(4, 0.8), (1, 0.5), (0, 0.0)])
 def test_future_probability(k, p):
     assert relabel_probability(GoalStrategy.future, k) == pytest.approx(p)
