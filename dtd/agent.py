@@ -42,11 +42,6 @@ class Agent(Protocol):
         """Run ``updates`` gradient steps (then move the targets) and return mean diagnostics."""
         ...
 
-    def _batch(self, episodes: Episodes, size: int, rng: np.random.Generator) -> Batch:
-        return sample_transitions(
-            episodes, size, rng, self.relabel_prob, self.reward_fn, past_share=self.past_share
-        )
-
     def episode_metrics(self, episodes: Episodes) -> dict[str, float]:
         """Figures of collected episodes that only this kind of agent has (may be empty)."""
         ...
