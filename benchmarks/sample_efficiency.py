@@ -1,4 +1,4 @@
-"""Sample efficiency: N seeds of one algorithm on one task, and how soon they learn.
+r"""Sample efficiency: N seeds of one algorithm on one task, and how soon they learn.
 
 Trains seeds 0..N-1 (in parallel where cores allow; a run left unfinished in ``--out``
 resumes, a finished one is only read; the run directories are named as ``dtd sweep`` names

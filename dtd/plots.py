@@ -269,5 +269,7 @@ def _spread_text(spread: Spread, show) -> str:
 def _reached_text(row: GroupSummary, level: float, spread: Spread, show) -> str:
     if row.reached[level] == 0:
         return "not reached"
+    if np.isinf(spread.median) and np.isinf(spread.q25):
+        return f"not reached ({row.reached[level]}/{row.runs})"
     text = _spread_text(spread, show)
     return text if row.reached[level] == row.runs else f"{text} ({row.reached[level]}/{row.runs})"

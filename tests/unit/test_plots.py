@@ -89,6 +89,7 @@ def test_plot_writes_figures_and_summary(sweep_dir):
     assert her["reached_0.9"] == "1"
     assert her["wall_s_to_0.9_median"] == "inf"
     assert "3000 [2000-not reached] (2/3)" in result.table
+    assert "not reached (1/3)" in result.table  # 0.9: one run in three, the quartiles say no more
 
 
 def test_plot_of_nothing_says_so(tmp_path):
