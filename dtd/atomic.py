@@ -27,6 +27,28 @@ def write_atomic(path: Path, write: Callable[[IO[bytes]], None]) -> None:
         os.close(fd)
 
 
+def remove_stale_temporaries(folder: Path) -> list[Path]:
+    """Delete the temporary files under ``folder`` that :func:`write_atomic` left behind when its
+    process was killed mid-write (their process no longer exists); return them."""
+    removed = []
+    for tmp in folder.rglob(".*.tmp"):
+        pid = tmp.name.rsplit(".", 2)[-2]
+        if pid.isdigit() and not _process_exists(int(pid)):
+            tmp.unlink(missing_ok=True)
+            removed.append(tmp)
+    return removed
+
+
+def _process_exists(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True  # someone else's process
+    return True
+
+
 def write_text_atomic(path: Path, text: str) -> None:
     """:func:`write_atomic` for UTF-8 text."""
     write_atomic(path, lambda file: file.write(text.encode()))

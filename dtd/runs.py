@@ -14,6 +14,7 @@ import numpy as np
 import torch
 
 from dtd.agent import Agent, GoalConditionedAgent
+from dtd.atomic import remove_stale_temporaries
 from dtd.buffer import EpisodeBuffer
 from dtd.checkpoint import FORMAT_VERSION, load_checkpoint, restoring
 from dtd.collector import Collector, InlineCollector, ProcessCollector
@@ -254,6 +255,7 @@ def train(
             raise ConfigError("give the run directory once: --resume DIR (without --run-dir)")
         config = resumed_config(read_config(run), config)
         config.validate()
+        remove_stale_temporaries(run.root)  # half-written files of the process that was killed
         # A run killed during its first epoch has no checkpoint yet: it starts again.
         snapshot = load_checkpoint(run.latest) if run.latest.exists() else None
         components = build(config)
