@@ -5,6 +5,7 @@ from __future__ import annotations
 import functools
 import json
 import sys
+import warnings
 from pathlib import Path
 from typing import Annotated
 
@@ -129,7 +130,11 @@ def plot(
 
     if not run_dirs:
         raise DtdError("give at least one directory of runs")
-    result = draw_plots(run_dirs, out if out is not None else run_dirs[0])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = draw_plots(run_dirs, out if out is not None else run_dirs[0])
+    for warning in caught:
+        print(f"warning: {warning.message}", file=sys.stderr)
     print(result.table)
     for path in [*result.figures, result.summary_csv]:
         print(f"wrote {path}")

@@ -10,13 +10,14 @@ final success and of the env steps and wall time to reach each success level.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from dtd.atomic import write_text_atomic
-from dtd.config import Preset
+from dtd.config import Collection, Preset, TrainConfig
 from dtd.curves import SMOOTHING, Curve, band, quantile, read_curve
 from dtd.errors import RunDirError
 from dtd.run_dir import RunDir, read_config
@@ -70,13 +71,18 @@ class GroupSummary:
 
 
 def find_runs(directories: Sequence[Path]) -> list[RunCurve]:
-    """Every run under ``directories`` that has finished at least one epoch, sorted by path."""
+    """Every run under ``directories`` that has finished at least one epoch, sorted by path.
+
+    Two runs with the same settings but for the epoch budget (and where episodes are collected,
+    a matter of speed only) are one trial found twice, say a copy of an unfinished run beside
+    the run itself: the one with the most epochs counts, and a warning names the other.
+    """
     run_dirs: set[Path] = set()
     for directory in map(Path, directories):
         if not directory.is_dir():
             raise RunDirError(f"{directory} is not a directory")
-        run_dirs.update(path.parent for path in directory.rglob("config.json"))
-    runs = []
+        run_dirs.update(path.resolve().parent for path in directory.rglob("config.json"))
+    trials: dict[TrainConfig, RunCurve] = {}
     for run_dir in sorted(run_dirs):
         config = read_config(RunDir(run_dir))
         curve = read_curve(run_dir)
@@ -85,8 +91,18 @@ def find_runs(directories: Sequence[Path]) -> list[RunCurve]:
         label = config.algo.value
         if config.preset is not Preset.tuned:
             label += f" ({config.preset.value})"
-        runs.append(RunCurve(run_dir, config.env or "?", label, curve))
-    return runs
+        run = RunCurve(run_dir, config.env or "?", label, curve)
+        trial = dataclasses.replace(config, epochs=0, collector=Collection.auto)
+        if trial in trials:
+            kept, dropped = sorted([trials[trial], run], key=lambda r: len(r.curve), reverse=True)
+            warnings.warn(
+                f"{dropped.run_dir} repeats the trial in {kept.run_dir} ({len(dropped.curve)} "
+                f"against {len(kept.curve)} epochs); only the longer one counts",
+                stacklevel=2,
+            )
+            run = kept
+        trials[trial] = run
+    return sorted(trials.values(), key=lambda run: run.run_dir)
 
 
 def grouped(runs: Sequence[RunCurve]) -> dict[str, dict[str, list[Curve]]]:

@@ -97,3 +97,19 @@ def test_plot_of_nothing_says_so(tmp_path):
         plot([tmp_path], tmp_path / "out")
     with pytest.raises(RunDirError, match="not a directory"):
         plot([tmp_path / "missing"], tmp_path / "out")
+
+
+def test_a_trial_found_twice_counts_once(sweep_dir):
+    # A copy of her seed 0 stopped after 2 epochs (say, kept from an earlier session) and a
+    # longer budget for the same trial: the same trial, counted once, the longer copy kept.
+    write_run(sweep_dir / "copy", "her", 0, HER[0][:2])
+    with pytest.warns(UserWarning, match=r"repeats the trial.*2 against 4 epochs"):
+        runs = find_runs([sweep_dir / "sweep", sweep_dir / "copy"])
+    her_seed_0 = [run for run in runs if run.label == "her" and run.run_dir.name.endswith("her-s0")]
+    assert [run.run_dir.parent.name for run in her_seed_0] == ["sweep"]
+    rows = {row.label: row for row in summaries(runs)}
+    assert rows["her"].runs == 3
+    # Another seed is another trial, not a repeat.
+    write_run(sweep_dir / "more", "her", 3, [0.1])
+    with pytest.warns(UserWarning):
+        assert {row.label: row.runs for row in summaries(find_runs([sweep_dir]))}["her"] == 4
