@@ -198,6 +198,7 @@ def draw(env: str, labels: dict[str, list[Curve]], path_stem: Path) -> list[Path
     import matplotlib.pyplot as plt
 
     figure, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True, layout="constrained")
+    faint = False
     for label, curves in labels.items():
         stats = band(curves)
         algo = label.split(" ")[0]
@@ -207,6 +208,7 @@ def draw(env: str, labels: dict[str, list[Curve]], path_stem: Path) -> list[Path
             name = f"{label} ({len(curves)} seed{'s' if len(curves) != 1 else ''})"
             colour = axis.plot(x[complete], stats.mean[complete], label=name, **style)[0].get_color()
             if not complete.all():  # past the shortest run: fewer seeds, drawn faint
+                faint = True
                 tail = np.flatnonzero(~complete)
                 start = max(tail[0] - 1, 0)
                 axis.plot(x[start:], stats.mean[start:], color=colour, ls=style["linestyle"], alpha=0.35)
@@ -218,7 +220,8 @@ def draw(env: str, labels: dict[str, list[Curve]], path_stem: Path) -> list[Path
         axis.set_ylim(-0.02, 1.02)
         axis.grid(alpha=0.3)
     axes[0].legend(loc="upper left")
-    figure.suptitle(f"{env}: mean over seeds, band = 25th-75th percentile (faint: not all seeds yet)")
+    note = " (faint: not all seeds yet)" if faint else ""
+    figure.suptitle(f"{env}: mean over seeds, band = 25th-75th percentile{note}")
     path_stem.parent.mkdir(parents=True, exist_ok=True)
     written = []
     for suffix in (".png", ".svg"):
