@@ -111,6 +111,7 @@ def sweep(
 def plot(
     run_dirs: tyro.conf.Positional[tuple[Path, ...]],
     out: Path | None = None,
+    max_env_steps: int | None = None,
 ) -> None:
     """Draw success against epochs and env steps per environment, and write summary.csv.
 
@@ -121,18 +122,22 @@ def plot(
     Examples:
       dtd plot runs/push-sweep
       dtd plot runs/push-sweep runs/push-sweep-paper --out docs/results/push
+      dtd plot runs/pick-sweep --max-env-steps 400000 --out runs/pick-sweep/at-400k
 
     Args:
         run_dirs: Sweep or run directories to read.
         out: Where the figures (PNG and SVG per environment) and summary.csv go (default: the first RUN_DIR).
+        max_env_steps: Compare runs at this budget: each curve ends at its last epoch within it (None: all).
     """
     from dtd.plots import plot as draw_plots
 
     if not run_dirs:
         raise DtdError("give at least one directory of runs")
+    if max_env_steps is not None and max_env_steps <= 0:
+        raise DtdError(f"--max-env-steps must be a positive number of env steps, got {max_env_steps}")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result = draw_plots(run_dirs, out if out is not None else run_dirs[0])
+        result = draw_plots(run_dirs, out if out is not None else run_dirs[0], max_env_steps)
     for warning in caught:
         print(f"warning: {warning.message}", file=sys.stderr)
     print(result.table)

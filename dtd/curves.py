@@ -37,6 +37,12 @@ class Curve:
     def final_success(self) -> float:
         return float(self.eval_success[-1]) if len(self) else float("nan")
 
+    def up_to(self, env_steps: float) -> Curve:
+        """The curve cut after its last epoch at or before ``env_steps``: the run as it was at
+        that budget (the whole curve if it stopped earlier)."""
+        keep = self.env_steps <= env_steps
+        return Curve(self.epoch[keep], self.env_steps[keep], self.wall_s[keep], self.eval_success[keep])
+
     def smoothed(self, window: int = SMOOTHING) -> np.ndarray:
         """Eval success averaged over each epoch and the ``window - 1`` before it (fewer at
         the start)."""

@@ -239,13 +239,27 @@ class PlotResult:
     table: str
 
 
-def plot(directories: Sequence[Path], out: Path) -> PlotResult:
+def cut_at(runs: Sequence[RunCurve], env_steps: float) -> list[RunCurve]:
+    """``runs`` as they were at ``env_steps``, to compare them at one budget; a run with no
+    epoch that early is left out."""
+    if not env_steps > 0:
+        raise ValueError(f"the budget must be a positive number of env steps, got {env_steps}")
+    cut = [dataclasses.replace(run, curve=run.curve.up_to(env_steps)) for run in runs]
+    return [run for run in cut if len(run.curve) > 0]
+
+
+def plot(directories: Sequence[Path], out: Path, max_env_steps: float | None = None) -> PlotResult:
     """Find the runs under ``directories``; write a figure per environment and summary.csv
-    into ``out``."""
+    into ``out``. With ``max_env_steps``, every run is taken as it was at that budget
+    (:func:`cut_at`), so that runs of different lengths are compared at one."""
     runs = find_runs(directories)
+    if max_env_steps is not None:
+        runs = cut_at(runs, max_env_steps)
     if not runs:
+        budget = f" within {max_env_steps:,.0f} env steps" if max_env_steps is not None else ""
         raise RunDirError(
-            "no run with a finished epoch under " + ", ".join(str(directory) for directory in directories)
+            f"no run with a finished epoch{budget} under "
+            + ", ".join(str(directory) for directory in directories)
         )
     figures = []
     for env, labels in grouped(runs).items():
@@ -253,7 +267,10 @@ def plot(directories: Sequence[Path], out: Path) -> PlotResult:
     rows = summaries(runs)
     csv_path = Path(out) / "summary.csv"
     write_text_atomic(csv_path, summary_csv(rows))
-    return PlotResult(figures, csv_path, summary_table(rows))
+    table = summary_table(rows)
+    if max_env_steps is not None:
+        table += f"\nevery run as it was at {max_env_steps:,.0f} env steps (--max-env-steps)"
+    return PlotResult(figures, csv_path, table)
 
 
 def _label_order(label: str) -> tuple[int, str]:

@@ -28,6 +28,15 @@ def test_first_reaching_a_level_ignores_a_lucky_epoch():
     assert c.final_success == 1.0
 
 
+def test_a_curve_cut_at_a_budget_is_the_run_as_it_was_then():
+    c = curve([0.0, 0.6, 0.3, 0.9])  # 5,000 env steps per epoch
+    early = c.up_to(12_000)
+    np.testing.assert_array_equal(early.epoch, [1, 2])
+    assert early.final_success == 0.6
+    assert len(c.up_to(20_000)) == 4 and len(c.up_to(1e9)) == 4
+    assert len(c.up_to(4_999)) == 0
+
+
 def test_read_curve_from_a_metrics_file(tmp_path):
     (tmp_path / "config.json").write_text("{}")
     assert len(read_curve(tmp_path)) == 0

@@ -92,6 +92,21 @@ def test_plot_writes_figures_and_summary(sweep_dir):
     assert "not reached (1/3)" in result.table  # 0.9: one run in three, the quartiles say no more
 
 
+def test_runs_compared_at_one_budget(sweep_dir):
+    result = plot([sweep_dir / "sweep"], sweep_dir / "out", max_env_steps=2500)
+    with open(result.summary_csv, newline="") as file:
+        rows = {row["algo"]: row for row in csv.DictReader(file)}
+    her = rows["her"]  # each seed's first 2 epochs: finals 0.6, 0.9, 0.3
+    assert (her["epochs_min"], her["epochs_max"]) == ("2", "2")
+    assert her["final_success_median"] == "0.600"
+    assert her["reached_0.5"] == "1"  # seed 1 only (smoothed 0.6); seed 0 reaches it later
+    assert her["env_steps_to_0.5_median"] == "inf"
+    assert rows["dtd"]["final_success_median"] == "1.000"
+    assert "as it was at 2,500 env steps" in result.table
+    with pytest.raises(RunDirError, match="within 999 env steps"):
+        plot([sweep_dir / "sweep"], sweep_dir / "out", max_env_steps=999)
+
+
 def test_plot_of_nothing_says_so(tmp_path):
     with pytest.raises(RunDirError, match="no run"):
         plot([tmp_path], tmp_path / "out")
