@@ -220,7 +220,7 @@ def draw(env: str, labels: dict[str, list[Curve]], path_stem: Path) -> list[Path
         axis.set_ylim(-0.02, 1.02)
         axis.grid(alpha=0.3)
     axes[0].legend(loc="upper left")
-    note = " (faint: not all seeds yet)" if faint else ""
+    note = " (faint: past the shortest run, over fewer seeds)" if faint else ""
     figure.suptitle(f"{env}: mean over seeds, band = 25th-75th percentile{note}")
     path_stem.parent.mkdir(parents=True, exist_ok=True)
     written = []
