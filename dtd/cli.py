@@ -133,8 +133,6 @@ def plot(
 
     if not run_dirs:
         raise DtdError("give at least one directory of runs")
-    if max_env_steps is not None and max_env_steps <= 0:
-        raise DtdError(f"--max-env-steps must be a positive number of env steps, got {max_env_steps}")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = draw_plots(run_dirs, out if out is not None else run_dirs[0], max_env_steps)

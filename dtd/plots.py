@@ -19,7 +19,7 @@ import numpy as np
 from dtd.atomic import write_text_atomic
 from dtd.config import Collection, Preset, TrainConfig
 from dtd.curves import SMOOTHING, Curve, band, quantile, read_curve
-from dtd.errors import RunDirError
+from dtd.errors import ConfigError, RunDirError
 from dtd.run_dir import RunDir, read_config
 
 LEVELS = (0.5, 0.9)
@@ -243,7 +243,7 @@ def cut_at(runs: Sequence[RunCurve], env_steps: float) -> list[RunCurve]:
     """``runs`` as they were at ``env_steps``, to compare them at one budget; a run with no
     epoch that early is left out."""
     if not env_steps > 0:
-        raise ValueError(f"the budget must be a positive number of env steps, got {env_steps}")
+        raise ConfigError(f"--max-env-steps must be a positive number of env steps, got {env_steps}")
     cut = [dataclasses.replace(run, curve=run.curve.up_to(env_steps)) for run in runs]
     return [run for run in cut if len(run.curve) > 0]
 

@@ -7,7 +7,7 @@ import pytest
 
 from dtd.config import Algo, Preset, TrainConfig
 from dtd.curves import Curve, band, quantile
-from dtd.errors import RunDirError
+from dtd.errors import ConfigError, RunDirError
 from dtd.plots import find_runs, plot, summaries
 from dtd.run_dir import RunDir, write_config
 
@@ -105,6 +105,8 @@ def test_runs_compared_at_one_budget(sweep_dir):
     assert "as it was at 2,500 env steps" in result.table
     with pytest.raises(RunDirError, match="within 999 env steps"):
         plot([sweep_dir / "sweep"], sweep_dir / "out", max_env_steps=999)
+    with pytest.raises(ConfigError, match="--max-env-steps must be a positive"):
+        plot([sweep_dir / "sweep"], sweep_dir / "out", max_env_steps=0)
 
 
 def test_plot_of_nothing_says_so(tmp_path):
