@@ -67,6 +67,8 @@ class LearnerConfig:
 
     hidden_sizes: tuple[int, ...] = (256, 256, 256)
     """Widths of the hidden ReLU layers of actor and critic."""
+    layer_norm: bool = False
+    """Normalise each hidden layer of actor and critic (LayerNorm before the ReLU)."""
     actor_lr: float = 1e-3
     """Adam learning rate of the actor."""
     critic_lr: float = 1e-3
@@ -324,6 +326,7 @@ PAPER_SETTINGS: dict[str, Any] = {
     "noise_eps": 0.2,
     "random_eps": 0.3,
     "learner.hidden_sizes": [256, 256, 256],
+    "learner.layer_norm": False,
     "learner.actor_lr": 1e-3,
     "learner.critic_lr": 1e-3,
     "learner.batch_size": 256,

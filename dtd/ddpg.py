@@ -40,8 +40,8 @@ class DDPGLearner:
         self.goal_norm = RunningNormalizer(goal_dim, config.norm_eps, config.norm_clip)
         input_dim = obs_dim + goal_dim
         self.head = head
-        self.actor = Actor(input_dim, action_dim, config.hidden_sizes)
-        self.critic = Critic(input_dim, action_dim, config.hidden_sizes)
+        self.actor = Actor(input_dim, action_dim, config.hidden_sizes, config.layer_norm)
+        self.critic = Critic(input_dim, action_dim, config.hidden_sizes, config.layer_norm)
         self.actor_target = _frozen_copy(self.actor)
         self.critic_target = _frozen_copy(self.critic)
         # The fused kernel does Adam's whole step in one pass (the default on CPU is a loop of

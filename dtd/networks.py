@@ -11,12 +11,16 @@ from torch import nn
 from dtd.normalizer import RunningNormalizer
 
 
-def mlp(in_dim: int, hidden_sizes: Sequence[int], out_dim: int) -> nn.Sequential:
-    """ReLU perceptron with the given hidden widths and a linear output."""
+def mlp(in_dim: int, hidden_sizes: Sequence[int], out_dim: int, layer_norm: bool = False) -> nn.Sequential:
+    """ReLU perceptron with the given hidden widths and a linear output; with ``layer_norm``
+    each hidden layer is normalised (LayerNorm) before its ReLU."""
     layers: list[nn.Module] = []
     width = in_dim
     for hidden in hidden_sizes:
-        layers += [nn.Linear(width, hidden), nn.ReLU()]
+        layers.append(nn.Linear(width, hidden))
+        if layer_norm:
+            layers.append(nn.LayerNorm(hidden))
+        layers.append(nn.ReLU())
         width = hidden
     layers.append(nn.Linear(width, out_dim))
     return nn.Sequential(*layers)
@@ -25,9 +29,11 @@ def mlp(in_dim: int, hidden_sizes: Sequence[int], out_dim: int) -> nn.Sequential
 class Actor(nn.Module):
     """mu(o || g) as a unit vector in [-1, 1]^d; a head maps it to an action."""
 
-    def __init__(self, input_dim: int, output_dim: int, hidden_sizes: Sequence[int]) -> None:
+    def __init__(
+        self, input_dim: int, output_dim: int, hidden_sizes: Sequence[int], layer_norm: bool = False
+    ) -> None:
         super().__init__()
-        self.body = mlp(input_dim, hidden_sizes, output_dim)
+        self.body = mlp(input_dim, hidden_sizes, output_dim, layer_norm)
 
     def forward(self, inputs: torch.Tensor) -> torch.Tensor:
         return torch.tanh(self.body(inputs))
@@ -36,9 +42,11 @@ class Actor(nn.Module):
 class Critic(nn.Module):
     """Q(o || g, a), given the action as the head encodes it for the critic."""
 
-    def __init__(self, input_dim: int, action_features: int, hidden_sizes: Sequence[int]) -> None:
+    def __init__(
+        self, input_dim: int, action_features: int, hidden_sizes: Sequence[int], layer_norm: bool = False
+    ) -> None:
         super().__init__()
-        self.body = mlp(input_dim + action_features, hidden_sizes, 1)
+        self.body = mlp(input_dim + action_features, hidden_sizes, 1, layer_norm)
 
     def forward(self, inputs: torch.Tensor, action_features: torch.Tensor) -> torch.Tensor:
         return self.body(torch.cat([inputs, action_features], dim=-1)).squeeze(-1)

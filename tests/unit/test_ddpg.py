@@ -113,6 +113,24 @@ def test_target_moves_by_one_minus_polyak():
         assert torch.allclose(new, 0.75 * t + 0.25 * o, atol=1e-6)
 
 
+def test_layer_norm_normalises_every_hidden_layer_of_both_networks():
+    learner = make_learner(dataclasses.replace(SMALL, layer_norm=True))
+    for net in (learner.actor, learner.critic, learner.actor_target, learner.critic_target):
+        norms = [m for m in net.modules() if isinstance(m, torch.nn.LayerNorm)]
+        assert [n.normalized_shape for n in norms] == [(32,), (32,)]
+    hidden = {}
+    learner.critic.body[1].register_forward_hook(lambda m, i, out: hidden.update(out=out.detach()))
+    rng = np.random.default_rng(0)
+    batch = random_batch(rng)
+    learner.critic(torch.from_numpy(np.hstack([batch.obs, batch.goal])), torch.from_numpy(batch.action / 2))
+    assert torch.allclose(hidden["out"].mean(-1), torch.zeros(16), atol=1e-5)
+    before = [p.clone() for p in learner.critic.parameters()]
+    metrics = learner.update(batch)
+    assert np.isfinite(metrics["critic_loss"])
+    assert any(not torch.equal(b, p) for b, p in zip(before, learner.critic.parameters(), strict=True))
+    assert not any(isinstance(m, torch.nn.LayerNorm) for m in make_learner().critic.modules())
+
+
 def test_critic_targets_stay_in_the_return_range():
     learner = make_learner()
     with torch.no_grad():  # a critic that wildly overestimates
