@@ -132,18 +132,24 @@ def goal_bounds(
     """A box holding the task's goals: the goal space's own bounds where finite, else the
     range of goals and achieved goals over ``resets`` seeded resets, widened by a tenth of
     that range on each side. A coordinate that no goal varies (FetchPush's table height) is
-    pinned: a sub-goal off it could never be reached."""
+    pinned, and one where every reset puts the object at the same value with no goal below
+    it (FetchPickAndPlace's block resting on the table) is not widened below that value:
+    a sub-goal off the table or inside it could never be reached."""
     space = env.observation_space["desired_goal"]
     low = np.asarray(space.low, dtype=np.float64).ravel().copy()
     high = np.asarray(space.high, dtype=np.float64).ravel().copy()
     if not (np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
-        seen = []
+        goals, achieved = [], []
         for seed in range(resets):
             first, _ = env.reset(seed=seed)
-            seen += [first["desired_goal"].ravel(), first["achieved_goal"].ravel()]
-        seen_low, seen_high = np.min(seen, axis=0), np.max(seen, axis=0)
+            goals.append(first["desired_goal"].ravel())
+            achieved.append(first["achieved_goal"].ravel())
+        seen_low = np.minimum(np.min(goals, axis=0), np.min(achieved, axis=0))
+        seen_high = np.maximum(np.max(goals, axis=0), np.max(achieved, axis=0))
         margin = 0.1 * (seen_high - seen_low)
-        low = np.where(np.isfinite(low), low, seen_low - margin)
+        lowest_achieved = np.min(achieved, axis=0)
+        resting = (np.ptp(achieved, axis=0) < 1e-6) & (np.min(goals, axis=0) >= lowest_achieved - 1e-6)
+        low = np.where(np.isfinite(low), low, seen_low - np.where(resting, 0.0, margin))
         high = np.where(np.isfinite(high), high, seen_high + margin)
     if quaternion is not None:
         low[quaternion[0] : quaternion[1]] = -1.0

@@ -165,6 +165,20 @@ def test_goal_box_pins_the_coordinates_no_goal_varies():
     assert np.all(high[:2] - low[:2] < 0.5)
 
 
+def test_goal_box_stops_at_the_height_where_the_object_rests():
+    # FetchPickAndPlace's block starts on the table and its goals lie on it or in the air: the
+    # box's floor is the table, its ceiling above the highest goal.
+    envs, spec = make_envs("FetchPickAndPlace-v4", 1)
+    low, high = np.array(spec.goal_low), np.array(spec.goal_high)
+    first, _ = envs[0].reset(seed=7)
+    assert low[2] == pytest.approx(first["achieved_goal"][2], abs=1e-6)
+    assert high[2] > 0.85 and np.all(high[:2] - low[:2] > 0.3)
+    # FetchReach's gripper also starts at one place, but its goals lie below it: a margin there.
+    envs, spec = make_envs("FetchReach-v4", 1)
+    first, _ = envs[0].reset(seed=7)
+    assert spec.goal_low[2] < first["achieved_goal"][2] - 0.1
+
+
 def make_agent(seed: int = 0, eps: float = 1.0, high_updates: int = 4) -> DotToDotAgent:
     torch.manual_seed(seed)
     config = LearnerConfig(hidden_sizes=(16,), batch_size=8)
