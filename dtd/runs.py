@@ -18,7 +18,16 @@ from dtd.atomic import remove_stale_temporaries
 from dtd.buffer import EpisodeBuffer
 from dtd.checkpoint import FORMAT_VERSION, load_checkpoint, restoring
 from dtd.collector import Collector, InlineCollector, ProcessCollector
-from dtd.config import Algo, Collection, Preset, RelabelWindow, TrainConfig, flat_items, preset_config
+from dtd.config import (
+    Algo,
+    Collection,
+    Preset,
+    RelabelWindow,
+    TrainConfig,
+    flat_items,
+    preset_config,
+    with_algorithm_batch,
+)
 from dtd.ddpg import DDPGLearner
 from dtd.envs import EnvSpec, make_envs, reward_function
 from dtd.errors import CheckpointError, ConfigError, RunDirError
@@ -53,6 +62,7 @@ class Components:
 
 def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env) -> Agent:
     """The agent ``config.algo`` names, with fresh networks and an empty replay."""
+    config = with_algorithm_batch(config)
     gamma = config.learner.gamma if config.learner.gamma is not None else spec.default_gamma()
     low = DDPGLearner(
         spec.obs_dim, spec.goal_dim, spec.action_dim, BoxActionHead(spec.action_max), config.learner, gamma
@@ -281,8 +291,10 @@ def train(
                 raise
     else:
         config.validate()
-        # The thread count is part of what makes a run repeatable: the run records it.
+        # The thread count is part of what makes a run repeatable: the run records it, and the
+        # batch its algorithm chose.
         config = dataclasses.replace(config, threads=resolved_threads(config.threads, config.collector))
+        config = with_algorithm_batch(config)
         run = RunDir(Path(run_dir) if run_dir is not None else default_run_dir(config))
         if run.holds_run() and not force:
             raise RunDirError(

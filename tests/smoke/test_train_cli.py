@@ -139,3 +139,18 @@ def test_the_paper_preset_gives_the_defaults_and_options_beside_it_win(tmp_path)
     config = json.loads((run_dir / "config.json").read_text())["config"]
     assert config["preset"] == "paper" and config["low_relabel_window"] == "episode"
     assert config["high_updates_per_cycle"] == 40 and config["updates_per_cycle"] == 5
+
+
+def test_a_run_records_the_batch_its_algorithm_chose(tmp_path):
+    at = TINY.index("--batch-size")
+    small = [*TINY[:at], *TINY[at + 2 :], "--epochs", "1"]
+    for algo, batch in (("dtd", 256), ("her", 1024)):
+        run_dir = tmp_path / algo
+        result = dtd("train", "--env", "FetchReach-v4", "--algo", algo, *small, "--run-dir", run_dir)
+        assert result.returncode == 0, result.stderr
+        config = json.loads((run_dir / "config.json").read_text())["config"]
+        assert config["learner"]["batch_size"] == batch
+        # Resuming with the default (0) keeps the recorded batch.
+        result = dtd("train", "--resume", run_dir, "--epochs", "2", "--no-progress")
+        assert result.returncode == 0, result.stderr
+        assert json.loads((run_dir / "config.json").read_text())["config"]["learner"]["batch_size"] == batch

@@ -15,6 +15,7 @@ from dtd.config import (
     RelabelWindow,
     TrainConfig,
     preset_config,
+    with_algorithm_batch,
     with_settings,
 )
 from dtd.errors import CheckpointError, ConfigError
@@ -28,7 +29,7 @@ def test_defaults_are_the_reference_settings_but_where_tuned():
     assert (c.n_cycles, c.episodes_per_cycle, c.updates_per_cycle, c.test_episodes) == (50, 2, 40, 10)
     assert (c.buffer_size, c.replay_k, c.noise_eps, c.random_eps) == (1_000_000, 4, 0.2, 0.3)
     learner = c.learner
-    assert learner.hidden_sizes == (256, 256, 256) and learner.batch_size == 1024
+    assert learner.hidden_sizes == (256, 256, 256) and learner.batch_size == 0  # the algorithm's
     assert c.high.batch_size == 256
     assert (learner.actor_lr, learner.critic_lr, learner.polyak, learner.action_l2) == (1e-3, 1e-3, 0.95, 1.0)
     assert (learner.norm_clip, learner.obs_clip, learner.norm_eps) == (5.0, 200.0, 0.01)
@@ -51,6 +52,19 @@ def test_defaults_are_the_reference_settings_but_where_tuned():
 def test_invalid_settings_name_their_option(change, flag):
     with pytest.raises(ConfigError, match=flag):
         dataclasses.replace(VALID, **change).validate()
+
+
+def test_the_low_levels_batch_is_the_algorithms_unless_given():
+    batch = {algo: with_algorithm_batch(TrainConfig(algo=algo)).learner.batch_size for algo in Algo}
+    assert batch == {Algo.her: 1024, Algo.ddpg: 1024, Algo.dtd: 256}
+    given = TrainConfig(algo=Algo.dtd, learner=LearnerConfig(batch_size=512))
+    assert with_algorithm_batch(given) == given
+    assert with_algorithm_batch(preset_config(Preset.paper, algo=Algo.her)).learner.batch_size == 256
+    assert with_algorithm_batch(TrainConfig(algo=Algo.dtd)).high.batch_size == 256
+    with pytest.raises(ConfigError, match="--batch-size must be at least 0"):
+        dataclasses.replace(VALID, learner=LearnerConfig(batch_size=-1)).validate()
+    with pytest.raises(ConfigError, match=r"--high\.batch-size must be at least 1"):
+        dataclasses.replace(VALID, high=LearnerConfig(batch_size=0)).validate()
 
 
 def test_dict_round_trip():
