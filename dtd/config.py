@@ -157,8 +157,11 @@ class TrainConfig:
     """Settings of the DDPG learner (of the low level, for dtd)."""
     segments: int = 2
     """dtd: segments an episode is cut into; one sub-goal each, the last one being the goal."""
-    subgoal_sigma: float = 0.05
-    """dtd: std of the Gaussian perturbation of the achieved goal proposed as a sub-goal."""
+    subgoal_sigma: float = 0.1
+    """dtd: std of the Gaussian perturbation of the achieved goal proposed as a sub-goal (the
+    reference: 0.05). With 0.1 FetchPush passed 0.9 success within 200k steps on three seeds
+    of three (one of three with 0.05), and on FetchPickAndPlace the high level learns sooner
+    to lift the block with its first sub-goal (0.5 success at about 215k steps, not 270k)."""
     subgoal_eps_start: float = 1.0
     """dtd: probability of a perturbation sub-goal (instead of the high level's) at the start."""
     subgoal_eps_floor: float = 0.1
@@ -356,6 +359,7 @@ PAPER_SETTINGS: dict[str, Any] = {
     "learner.obs_clip": 200.0,
     "learner.norm_eps": 0.01,
     "segments": 2,
+    "subgoal_sigma": 0.05,
     # Dot-to-Dot as the paper describes it: near goals for the low level, both levels
     # updated alike in each training phase.
     "low_relabel_window": "segment",

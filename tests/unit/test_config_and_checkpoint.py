@@ -122,6 +122,7 @@ def test_paper_preset_is_the_reference_and_options_override_it():
     assert (learner.actor_lr, learner.critic_lr, learner.polyak, learner.action_l2) == (1e-3, 1e-3, 0.95, 1.0)
     assert learner.gamma is None and learner.clip_return
     assert paper.low_relabel_window is RelabelWindow.segment and paper.high_updates_per_cycle == 40
+    assert paper.subgoal_sigma == 0.05 and TrainConfig().subgoal_sigma == 0.1
     assert TrainConfig.from_dict(paper.to_dict()) == paper
     assert preset_config(Preset.tuned) == TrainConfig()
 
