@@ -22,6 +22,7 @@ import numpy as np
 
 from dtd.checkpoint import load_checkpoint
 from dtd.errors import CheckpointError
+from dtd.run_dir import RunDir
 
 OBJECT_TASKS = ("FetchPush", "FetchSlide", "FetchPickAndPlace")
 NEAR = 0.05
@@ -33,7 +34,7 @@ MOVED = (0.01, 0.05)
 def episode_motion(run: Path) -> tuple[int, np.ndarray, np.ndarray]:
     """Index of the first stored episode, per-episode largest displacement of the object and
     closest approach of the gripper, in the order the episodes were collected."""
-    state = load_checkpoint(run / "checkpoints" / "latest.pt")
+    state = load_checkpoint(RunDir(run).latest)
     env_id = state["env_id"]
     if not env_id.startswith(OBJECT_TASKS):
         raise SystemExit(f"{run}: {env_id} is not one of the Fetch object tasks ({', '.join(OBJECT_TASKS)})")
@@ -47,6 +48,11 @@ def episode_motion(run: Path) -> tuple[int, np.ndarray, np.ndarray]:
     displacement = np.linalg.norm(achieved - achieved[:, :1], axis=-1).max(axis=1)
     approach = np.linalg.norm(gripper - achieved, axis=-1).min(axis=1)
     return added - size, displacement, approach
+
+
+def by_block(flags: np.ndarray, block: int) -> str:
+    """The share of true flags in each run of ``block`` episodes."""
+    return " ".join(f"{np.mean(flags[i : i + block]):.2f}" for i in range(0, len(flags), block))
 
 
 def main() -> None:
@@ -63,15 +69,10 @@ def main() -> None:
             first, displacement, approach = episode_motion(run)
         except CheckpointError as exc:
             raise SystemExit(f"error: {exc}") from None
-        starts = range(0, len(displacement), args.block)
         print(f"{run} (episodes {first + 1}-{first + len(displacement)}, blocks of {args.block})")
-        print(
-            f"  gripper within {NEAR * 100:.0f} cm  "
-            + " ".join(f"{np.mean(approach[i : i + args.block] < NEAR):.2f}" for i in starts)
-        )
+        print(f"  gripper within {NEAR * 100:.0f} cm  {by_block(approach < NEAR, args.block)}")
         for moved in MOVED:
-            shares = " ".join(f"{np.mean(displacement[i : i + args.block] > moved):.2f}" for i in starts)
-            print(f"  object moved > {moved * 100:.0f} cm  {shares}")
+            print(f"  object moved > {moved * 100:.0f} cm  {by_block(displacement > moved, args.block)}")
 
 
 if __name__ == "__main__":
