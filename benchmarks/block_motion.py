@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from dtd.checkpoint import load_checkpoint
 from dtd.errors import CheckpointError
-from dtd.run_dir import RunDir
+from dtd.training.checkpoint import load_checkpoint
+from dtd.training.run_dir import RunDir
 
 OBJECT_TASKS = ("FetchPush", "FetchSlide", "FetchPickAndPlace")
 NEAR = 0.05

@@ -25,8 +25,8 @@ import numpy as np
 import torch
 
 from dtd.config import Algo, Collection, TrainConfig
-from dtd.envs import make_env
-from dtd.runs import build, close_all
+from dtd.envs.make import make_env
+from dtd.training.components import build, close_all
 
 
 class TimedPhysics:

@@ -15,8 +15,8 @@ import platform
 from pathlib import Path
 
 from dtd.config import Algo, TrainConfig, with_settings
-from dtd.run_dir import RunDir, read_config
-from dtd.runs import train_for_steps
+from dtd.training.lifecycle import train_for_steps
+from dtd.training.run_dir import RunDir, read_config
 
 
 def main() -> None:

@@ -23,9 +23,9 @@ import numpy as np
 import torch
 
 from dtd.config import Algo, TrainConfig
-from dtd.envs import make_env
-from dtd.run_dir import RunDir, read_config
-from dtd.runs import train_for_steps
+from dtd.envs.make import make_env
+from dtd.training.lifecycle import train_for_steps
+from dtd.training.run_dir import RunDir, read_config
 
 Curve = list[tuple[int, float, float]]  # (env steps, eval success, wall seconds)
 

@@ -4,7 +4,7 @@ Trains seeds 0..N-1 (in parallel where cores allow; a run left unfinished in ``-
 resumes, a finished one is only read; the run directories are named as ``dtd sweep`` names
 them, <env>-<algo>-s<seed>, so a sweep's directory serves as ``--out``) and prints, per seed
 and as median [min, max], the env steps and wall time at which eval success first reached 0.5
-and 0.9 (averaged over 3 epochs, see ``dtd.curves.SMOOTHING``) and the final eval success.
+and 0.9 (averaged over 3 epochs, see ``dtd.experiments.curves.SMOOTHING``) and the final eval success.
 A benchmark, not a test.
 
     python benchmarks/sample_efficiency.py --env FetchPush-v4 --algo her --seeds 3 \
@@ -20,10 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from dtd.config import Algo, Preset, preset_config, with_settings
-from dtd.curves import SMOOTHING, Curve, read_curve
-from dtd.runs import epochs_for_steps, usable_cores
-from dtd.sweep import trial_name
-from dtd.trials import Trial, TrialOutcome, run_local, sharing_cores
+from dtd.experiments.curves import SMOOTHING, Curve, read_curve
+from dtd.experiments.sweep import trial_name
+from dtd.experiments.trials import Trial, TrialOutcome, run_local, sharing_cores
+from dtd.training.components import usable_cores
+from dtd.training.lifecycle import epochs_for_steps
 
 LEVELS = (0.5, 0.9)
 

@@ -17,7 +17,7 @@ import time
 import torch
 
 from dtd.config import Algo, Collection, TrainConfig, with_settings
-from dtd.runs import build, close_all
+from dtd.training.components import build, close_all
 
 
 def seconds_per_kilostep(

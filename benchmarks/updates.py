@@ -14,10 +14,10 @@ import numpy as np
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
+from dtd.agents.ddpg import DDPGLearner
+from dtd.agents.networks import BoxActionHead
+from dtd.agents.records import Batch
 from dtd.config import LearnerConfig
-from dtd.ddpg import DDPGLearner
-from dtd.networks import BoxActionHead
-from dtd.records import Batch
 
 OBS, GOAL, ACT = 25, 3, 4  # FetchPush
 

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from dtd.records import Episodes
+from dtd.agents.records import Episodes
 
 _FIELDS = Episodes._fields
 

@@ -9,10 +9,10 @@ import numpy as np
 import torch
 from torch import nn
 
+from dtd.agents.networks import ActionHead, Actor, Critic
+from dtd.agents.normalizer import RunningNormalizer
+from dtd.agents.records import Batch
 from dtd.config import LearnerConfig
-from dtd.networks import ActionHead, Actor, Critic
-from dtd.normalizer import RunningNormalizer
-from dtd.records import Batch
 
 
 class DDPGLearner:

@@ -10,15 +10,15 @@ from typing import Any
 import numpy as np
 import torch
 
-from dtd.agent import mean_metrics
-from dtd.buffer import EpisodeBuffer
-from dtd.ddpg import DDPGLearner
-from dtd.envs import RewardFn
-from dtd.exploration import ActionNoise
-from dtd.her import sample_transitions
-from dtd.networks import SubgoalHead
-from dtd.records import Batch, Episodes
-from dtd.segments import episode_plan, high_level_input, sample_segment_transitions
+from dtd.agents.buffer import EpisodeBuffer
+from dtd.agents.ddpg import DDPGLearner
+from dtd.agents.exploration import ActionNoise
+from dtd.agents.her import sample_transitions
+from dtd.agents.interface import mean_metrics
+from dtd.agents.networks import SubgoalHead
+from dtd.agents.records import Batch, Episodes
+from dtd.agents.segments import episode_plan, high_level_input, sample_segment_transitions
+from dtd.envs.spec import RewardFn
 
 
 @dataclasses.dataclass(frozen=True)

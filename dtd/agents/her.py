@@ -6,8 +6,8 @@ import enum
 
 import numpy as np
 
-from dtd.envs import RewardFn
-from dtd.records import Batch, Episodes
+from dtd.agents.records import Batch, Episodes
+from dtd.envs.spec import RewardFn
 
 
 class GoalStrategy(enum.Enum):

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 import torch
 from torch import nn
 
-from dtd.normalizer import RunningNormalizer
+from dtd.agents.normalizer import RunningNormalizer
 
 
 def mlp(in_dim: int, hidden_sizes: Sequence[int], out_dim: int, layer_norm: bool = False) -> nn.Sequential:

@@ -11,9 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from dtd.envs import RewardFn
-from dtd.her import future_indices
-from dtd.records import Batch, Episodes
+from dtd.agents.her import future_indices
+from dtd.agents.records import Batch, Episodes
+from dtd.envs.spec import RewardFn
 
 
 def segment_bounds(horizon: int, segments: int) -> np.ndarray:

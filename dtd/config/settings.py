@@ -1,20 +1,15 @@
-"""The one typed source of configuration: defaults, ``--help`` text and logged settings.
-
-Every field's docstring is its help text on the command line. Facts that follow from the
-environment (dimensions, horizon, the default discount) live in :class:`dtd.envs.EnvSpec`
-and are never written back here.
-"""
+"""The settings of a run as frozen dataclasses: every field's default, and its docstring as the
+option's help text; read back from and written to plain JSON data."""
 
 from __future__ import annotations
 
 import dataclasses
 import enum
-import json
-import math
 from typing import Any
 
 import tyro
 
+from dtd.config.validation import validate
 from dtd.errors import ConfigError
 
 
@@ -146,9 +141,9 @@ class TrainConfig:
     random_eps: float = 0.3
     """Exploration: probability of taking a uniformly random action instead."""
     threads: int = 0
-    """Torch threads for the learner; 0: chosen for this machine (``dtd.runs.resolved_threads``)
-    and recorded in the run's config.json. Runs with the same thread count are the same bit
-    for bit."""
+    """Torch threads for the learner; 0: chosen for this machine (its usable cores, less one for
+    a collecting process, at most 4) and recorded in the run's config.json. Runs with the same
+    thread count are the same bit for bit."""
     collector: Collection = Collection.auto
     """Where training episodes are collected (a matter of speed only: at the same thread count
     the run is the same; with ``--threads 0`` a collecting process leaves the learner a core
@@ -188,72 +183,7 @@ class TrainConfig:
 
     def validate(self) -> None:
         """Raise :class:`ConfigError` naming the first setting that cannot work."""
-        checks: list[tuple[bool, str]] = [
-            (self.env is not None and self.env.strip() != "", "--env is required"),
-            (self.epochs >= 1, f"--epochs must be at least 1, got {self.epochs}"),
-            (self.n_cycles >= 1, f"--n-cycles must be at least 1, got {self.n_cycles}"),
-            (
-                self.episodes_per_cycle >= 1,
-                f"--episodes-per-cycle must be at least 1, got {self.episodes_per_cycle}",
-            ),
-            (
-                self.updates_per_cycle >= 0,
-                f"--updates-per-cycle must be 0 or more, got {self.updates_per_cycle}",
-            ),
-            (
-                self.test_episodes >= 1,
-                f"--test-episodes must be at least 1, got {self.test_episodes}",
-            ),
-            (self.buffer_size >= 1, f"--buffer-size must be at least 1, got {self.buffer_size}"),
-            (self.replay_k >= 0, f"--replay-k must be 0 or more, got {self.replay_k}"),
-            (
-                _finite_in(self.past_goal_share, 0, 1),
-                f"--past-goal-share must lie in [0, 1], got {self.past_goal_share}",
-            ),
-            (_finite_in(self.noise_eps, 0, math.inf), f"--noise-eps must be >= 0, got {self.noise_eps}"),
-            (
-                _finite_in(self.random_eps, 0, 1),
-                f"--random-eps must lie in [0, 1], got {self.random_eps}",
-            ),
-            (self.threads >= 0, f"--threads must be 0 (automatic) or more, got {self.threads}"),
-            (self.seed >= 0, f"--seed must be 0 or more, got {self.seed}"),
-            (self.segments >= 2, f"--segments must be at least 2, got {self.segments}"),
-            (
-                _finite_in(self.subgoal_sigma, 0, math.inf),
-                f"--subgoal-sigma must be >= 0, got {self.subgoal_sigma}",
-            ),
-            (
-                _finite_in(self.subgoal_eps_start, 0, 1) and _finite_in(self.subgoal_eps_floor, 0, 1),
-                "--subgoal-eps-start and --subgoal-eps-floor must lie in [0, 1]",
-            ),
-            (
-                _finite_in(self.subgoal_eps_decay_epochs, 0, math.inf),
-                f"--subgoal-eps-decay-epochs must be >= 0, got {self.subgoal_eps_decay_epochs}",
-            ),
-            (
-                _finite_in(self.subgoal_noise, 0, math.inf),
-                f"--subgoal-noise must be >= 0, got {self.subgoal_noise}",
-            ),
-            (
-                _positive(self.subgoal_max_distance),
-                f"--subgoal-max-distance must be > 0, got {self.subgoal_max_distance}",
-            ),
-            (self.high_replay_k >= 0, f"--high-replay-k must be 0 or more, got {self.high_replay_k}"),
-            (
-                self.high_updates_per_cycle >= 1,
-                f"--high-updates-per-cycle must be at least 1, got {self.high_updates_per_cycle}",
-            ),
-            (
-                _finite_in(self.hindsight_action_prob, 0, 1),
-                f"--hindsight-action-prob must lie in [0, 1], got {self.hindsight_action_prob}",
-            ),
-        ]
-        # The low level's batch may be 0: the algorithm's (LOW_LEVEL_BATCH).
-        checks += _learner_checks(self.learner, "--", smallest_batch=0)
-        checks += _learner_checks(self.high, "--high.", smallest_batch=1)
-        for ok, message in checks:
-            if not ok:
-                raise ConfigError(message)
+        validate(self)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-ready data (enums as their values)."""
@@ -292,115 +222,6 @@ def _learner_from_dict(data: dict[str, Any], default: LearnerConfig) -> LearnerC
     return dataclasses.replace(default, **data)
 
 
-def _learner_checks(learner: LearnerConfig, prefix: str, smallest_batch: int) -> list[tuple[bool, str]]:
-    return [
-        (
-            len(learner.hidden_sizes) >= 1 and all(h >= 1 for h in learner.hidden_sizes),
-            f"{prefix}hidden-sizes must be positive widths, got {learner.hidden_sizes}",
-        ),
-        (_positive(learner.actor_lr), f"{prefix}actor-lr must be > 0, got {learner.actor_lr}"),
-        (_positive(learner.critic_lr), f"{prefix}critic-lr must be > 0, got {learner.critic_lr}"),
-        (
-            learner.batch_size >= smallest_batch,
-            f"{prefix}batch-size must be at least {smallest_batch}, got {learner.batch_size}",
-        ),
-        (_finite_in(learner.polyak, 0, 1), f"{prefix}polyak must lie in [0, 1], got {learner.polyak}"),
-        (
-            _finite_in(learner.action_l2, 0, math.inf),
-            f"{prefix}action-l2 must be >= 0, got {learner.action_l2}",
-        ),
-        (
-            learner.gamma is None or (_finite_in(learner.gamma, 0, 1) and learner.gamma > 0),
-            f"{prefix}gamma must lie in (0, 1], got {learner.gamma}",
-        ),
-        (_positive(learner.norm_clip), f"{prefix}norm-clip must be > 0, got {learner.norm_clip}"),
-        (_positive(learner.obs_clip), f"{prefix}obs-clip must be > 0, got {learner.obs_clip}"),
-        (_positive(learner.norm_eps), f"{prefix}norm-eps must be > 0, got {learner.norm_eps}"),
-    ]
-
-
-def with_algorithm_batch(config: TrainConfig) -> TrainConfig:
-    """``config`` with a low-level batch of 0 replaced by its algorithm's (``LOW_LEVEL_BATCH``)."""
-    if config.learner.batch_size:
-        return config
-    learner = dataclasses.replace(config.learner, batch_size=LOW_LEVEL_BATCH[config.algo])
-    return dataclasses.replace(config, learner=learner)
-
-
-def flat_items(config: TrainConfig) -> dict[str, Any]:
-    """Settings keyed by their option names without dashes: the low level's learner settings
-    unprefixed, the high level's as ``high.<name>``."""
-    flat = config.to_dict()
-    flat.update(flat.pop("learner"))
-    flat.update({f"high.{name}": value for name, value in flat.pop("high").items()})
-    return flat
-
-
-PAPER_SETTINGS: dict[str, Any] = {
-    "n_cycles": 50,
-    "episodes_per_cycle": 2,
-    "updates_per_cycle": 40,
-    "test_episodes": 10,
-    "buffer_size": 1_000_000,
-    "replay_k": 4,
-    "past_goal_share": 0.0,
-    "noise_eps": 0.2,
-    "random_eps": 0.3,
-    "learner.hidden_sizes": [256, 256, 256],
-    "learner.layer_norm": False,
-    "learner.actor_lr": 1e-3,
-    "learner.critic_lr": 1e-3,
-    "learner.batch_size": 256,
-    "learner.polyak": 0.95,
-    "learner.action_l2": 1.0,
-    "learner.gamma": None,
-    "learner.clip_return": True,
-    "learner.norm_clip": 5.0,
-    "learner.obs_clip": 200.0,
-    "learner.norm_eps": 0.01,
-    "segments": 2,
-    "subgoal_sigma": 0.05,
-    # Dot-to-Dot as the paper describes it: near goals for the low level, both levels
-    # updated alike in each training phase.
-    "low_relabel_window": "segment",
-    "high_updates_per_cycle": 40,
-}
-"""The reference settings (HER's, which the paper keeps) by their ``with_settings`` names."""
-
-
-def preset_config(preset: Preset, **settings: Any) -> TrainConfig:
-    """The configuration ``preset`` starts from, with ``settings`` (fields) on top."""
-    config = TrainConfig(preset=preset)
-    if preset is Preset.paper:
-        config = with_settings(
-            config, [f"{name}={json.dumps(value)}" for name, value in PAPER_SETTINGS.items()]
-        )
-    return dataclasses.replace(config, **settings)
-
-
-def with_settings(config: TrainConfig, settings: list[str]) -> TrainConfig:
-    """``config`` with ``NAME=VALUE`` settings applied: NAME is a field of TrainConfig (a
-    learner's as ``learner.<name>`` or ``high.<name>``), VALUE is JSON, or else a string."""
-    data = config.to_dict()
-    for setting in settings:
-        name, equals, value = setting.partition("=")
-        if not equals or not name:
-            raise ConfigError(f"a setting is NAME=VALUE, got {setting!r}")
-        *parents, leaf = name.replace("-", "_").split(".")
-        target = data
-        for parent in parents:
-            if not isinstance(target.get(parent), dict):
-                raise ConfigError(f"unknown setting {name!r}")
-            target = target[parent]
-        if leaf not in target:
-            raise ConfigError(f"unknown setting {name!r}")
-        try:
-            target[leaf] = json.loads(value)
-        except json.JSONDecodeError:
-            target[leaf] = value
-    return TrainConfig.from_dict(data)
-
-
 def _plain(value: Any) -> Any:
     if isinstance(value, dict):
         return {k: _plain(v) for k, v in value.items()}
@@ -416,11 +237,3 @@ def _reject_unknown(cls: type, data: dict[str, Any]) -> None:
     unknown = sorted(set(data) - names)
     if unknown:
         raise ConfigError(f"unknown setting(s) in configuration: {', '.join(unknown)}")
-
-
-def _positive(x: float) -> bool:
-    return math.isfinite(x) and x > 0
-
-
-def _finite_in(x: float, low: float, high: float) -> bool:
-    return math.isfinite(x) and low <= x <= high

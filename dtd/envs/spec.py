@@ -1,18 +1,15 @@
-"""Making goal-conditioned environments and describing them with an :class:`EnvSpec`."""
+"""Describing a goal-conditioned environment once (:class:`EnvSpec`): its dimensions, horizon,
+goal box and batched reward; an environment that is not goal-conditioned is refused."""
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import difflib
-import io
 from collections.abc import Callable
 
 import gymnasium as gym
 import numpy as np
 
 from dtd.errors import EnvError
-from dtd.joint_reads import read_joints_by_index
 
 GOAL_KEYS = ("observation", "achieved_goal", "desired_goal")
 
@@ -41,37 +38,6 @@ class EnvSpec:
     def default_gamma(self) -> float:
         """The reference discount 1 - 1/T."""
         return 1.0 - 1.0 / self.horizon
-
-
-def register_robotics_envs() -> None:
-    """Register the Gymnasium-Robotics environments (quietly: the package prints a notice)."""
-    with contextlib.redirect_stderr(io.StringIO()):
-        import gymnasium_robotics
-
-    gym.register_envs(gymnasium_robotics)
-
-
-def make_env(env_id: str) -> gym.Env:
-    """Make ``env_id`` (a registered id or ``module:EnvId``) or raise :class:`EnvError`."""
-    register_robotics_envs()
-    try:
-        with contextlib.redirect_stderr(io.StringIO()):
-            env = gym.make(env_id, disable_env_checker=True)
-    except ModuleNotFoundError as exc:
-        module = env_id.split(":")[0]
-        raise EnvError(f"cannot import module {module!r} named in environment id {env_id!r}") from exc
-    except gym.error.Error as exc:
-        raise EnvError(_unknown_env_message(env_id)) from exc
-    read_joints_by_index(env)
-    return env
-
-
-def _unknown_env_message(env_id: str) -> str:
-    known = list(gym.registry.keys())
-    name = env_id.split(":")[-1]
-    close = difflib.get_close_matches(name, known, n=3, cutoff=0.6)
-    hint = f"; did you mean {', '.join(close)}?" if close else ""
-    return f"unknown environment id {env_id!r}{hint}"
 
 
 def env_spec(env: gym.Env, env_id: str) -> EnvSpec:
@@ -179,9 +145,3 @@ def reward_function(env: gym.Env) -> RewardFn:
         return np.asarray(compute_reward(achieved_goal, goal, None), dtype=np.float32)
 
     return reward
-
-
-def make_envs(env_id: str, count: int) -> tuple[list[gym.Env], EnvSpec]:
-    """``count`` instances of one environment and its checked spec."""
-    envs = [make_env(env_id) for _ in range(count)]
-    return envs, env_spec(envs[0], env_id)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from dtd.errors import RunDirError
-from dtd.run_dir import RunDir
+from dtd.training.run_dir import RunDir
 
 SMOOTHING = 3
 """Epochs whose eval success is averaged when a curve is asked when it first reached a level:

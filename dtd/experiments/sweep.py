@@ -2,7 +2,7 @@
 
 Locally the trials share this machine's cores through a pool of processes; with a Ray address
 they become tasks of a Ray cluster. Either way, a sweep run again on the same directory leaves
-finished trials alone and resumes interrupted ones (:mod:`dtd.trials`).
+finished trials alone and resumes interrupted ones (:mod:`dtd.experiments.trials`).
 """
 
 from __future__ import annotations
@@ -17,8 +17,9 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from dtd.config import Algo, TrainConfig
 from dtd.errors import ConfigError
-from dtd.runs import epochs_recorded, usable_cores
-from dtd.trials import Trial, TrialOutcome, run_local, run_ray, sharing_cores, trials_root
+from dtd.experiments.trials import Trial, TrialOutcome, run_local, run_ray, sharing_cores, trials_root
+from dtd.training.components import usable_cores
+from dtd.training.lifecycle import epochs_recorded
 
 
 def trial_name(config: TrainConfig) -> str:

@@ -2,7 +2,7 @@
 
 A trial is a configuration (its ``epochs`` the budget) and a run directory. Run again on the
 same directories, finished trials are left alone and interrupted ones resume from their last
-checkpoint (:func:`dtd.runs.train_to_end`). A failing trial is reported with its traceback
+checkpoint (:func:`dtd.training.lifecycle.train_to_end`). A failing trial is reported with its traceback
 and does not stop the others.
 """
 
@@ -76,7 +76,7 @@ def sharing_cores(config: TrainConfig, workers: int, cores: int) -> TrainConfig:
 
 def run_trial(trial: Trial) -> TrialOutcome:
     """Train ``trial`` to its last epoch (resuming, or leaving a finished run); never raises."""
-    from dtd.runs import train_to_end
+    from dtd.training.lifecycle import train_to_end
 
     start = time.perf_counter()
     try:

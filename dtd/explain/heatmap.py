@@ -16,8 +16,8 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
+from dtd.agents.dot_to_dot import DotToDotAgent
 from dtd.errors import ConfigError, EnvError
-from dtd.hierarchy import DotToDotAgent
 
 DEFAULT_START = (1.15, 0.55)
 """The block's default place: near one corner of the table, as in the paper's figure."""
@@ -169,8 +169,9 @@ def run_heatmaps(
     ``out``. Heights default to the block's resting height, and for tasks whose goals may lie
     in the air (FetchPickAndPlace) also 10, 20 and 30 cm above it."""
     from dtd.config import Algo
-    from dtd.run_dir import RunDir, read_config
-    from dtd.runs import close_all, load_run
+    from dtd.training.components import close_all
+    from dtd.training.run_dir import RunDir, read_config
+    from dtd.training.trained_run import load_run
 
     config = read_config(RunDir(Path(run_dir)))
     if config.algo is not Algo.dtd:

@@ -18,11 +18,11 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
-from dtd.agent import Agent
-from dtd.envs import EnvSpec
-from dtd.records import Episodes
-from dtd.rollout import run_episodes
-from dtd.segments import episode_plan
+from dtd.agents.interface import Agent
+from dtd.agents.records import Episodes
+from dtd.agents.segments import episode_plan
+from dtd.envs.spec import EnvSpec
+from dtd.training.rollout import run_episodes
 
 GOAL_RGBA = (0.9, 0.05, 0.05, 1.0)
 SUBGOAL_RGBA = (0.05, 0.85, 0.05, 1.0)
@@ -259,10 +259,11 @@ def render_run(
     MP4 and a PNG strip of key frames, and ``plans.json`` with every episode's plan."""
     import json
 
-    from dtd.atomic import write_text_atomic
+    from dtd.agents.dot_to_dot import DotToDotAgent
     from dtd.errors import ConfigError
-    from dtd.hierarchy import DotToDotAgent
-    from dtd.runs import close_all, load_run
+    from dtd.training.atomic import write_text_atomic
+    from dtd.training.components import close_all
+    from dtd.training.trained_run import load_run
 
     if episodes < 1:
         raise ConfigError(f"--episodes must be at least 1, got {episodes}")

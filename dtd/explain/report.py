@@ -13,10 +13,10 @@ import json
 from pathlib import Path
 from typing import Any
 
-from dtd.atomic import write_text_atomic
 from dtd.config import Algo, flat_items
-from dtd.curves import Curve, read_curve
-from dtd.run_dir import RunDir, read_config
+from dtd.experiments.curves import Curve, read_curve
+from dtd.training.atomic import write_text_atomic
+from dtd.training.run_dir import RunDir, read_config
 
 ASSETS = "report"
 """Folder beside report.html that holds its images and videos."""
@@ -77,8 +77,8 @@ def write_report(
 ) -> Report:
     """Render ``episodes`` episodes, draw the curves (and, for dtd on a Fetch block task, the
     heatmaps after the first epoch and at ``checkpoint``) and write ``RUN/report.html``."""
-    from dtd.plots import draw
-    from dtd.render import render_run
+    from dtd.experiments.plots import draw
+    from dtd.explain.render import render_run
 
     run = RunDir(Path(run_dir))
     config = read_config(run)
@@ -152,7 +152,7 @@ def _settings(config: Any) -> str:
 
 def _heatmap_section(run: RunDir, checkpoint: str, resolution: int, assets: list[Path]) -> str:
     from dtd.errors import EnvError
-    from dtd.heatmap import run_heatmaps
+    from dtd.explain.heatmap import run_heatmaps
 
     checkpoints = ("first", checkpoint) if run.first.exists() and checkpoint != "first" else (checkpoint,)
     try:

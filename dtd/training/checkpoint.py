@@ -9,8 +9,10 @@ from typing import Any
 
 import torch
 
-from dtd.atomic import write_atomic
+from dtd.config import TrainConfig
+from dtd.envs.spec import EnvSpec
 from dtd.errors import CheckpointError
+from dtd.training.atomic import write_atomic
 
 # 2: learners save their action head (motor commands or sub-goals) apart from the actor.
 # 3: exploration draws from a generator of its own, saved with the collector's environments.
@@ -51,3 +53,16 @@ def restoring(path: Path) -> Iterator[None]:
         raise CheckpointError(
             f"checkpoint {path} does not fit this run ({type(exc).__name__}: {exc})"
         ) from exc
+
+
+def check_checkpoint(snapshot: dict[str, Any], config: TrainConfig, spec: EnvSpec, path: Path) -> None:
+    """Refuse a checkpoint written for another environment or agent."""
+    if snapshot.get("env_id") != config.env or snapshot.get("algo") != config.algo.value:
+        raise CheckpointError(
+            f"checkpoint {path} belongs to a {snapshot.get('algo')} run on {snapshot.get('env_id')}, "
+            f"not to this {config.algo.value} run on {config.env}"
+        )
+    dims = ("obs_dim", "goal_dim", "action_dim", "horizon")
+    stored = snapshot.get("spec") or {}
+    if any(stored.get(name) != getattr(spec, name) for name in dims):
+        raise CheckpointError(f"checkpoint {path} was written for an environment of other dimensions")

@@ -21,10 +21,10 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from dtd.agent import Agent
-from dtd.envs import EnvSpec
-from dtd.records import Episodes
-from dtd.rollout import run_episodes
+from dtd.agents.interface import Agent
+from dtd.agents.records import Episodes
+from dtd.envs.spec import EnvSpec
+from dtd.training.rollout import run_episodes
 
 ExploringSide = Callable[[], tuple[list[gym.Env], Agent, EnvSpec, np.random.Generator]]
 """Builds, in the collecting process, its environments, an agent that only acts, the task's

@@ -5,7 +5,7 @@ from __future__ import annotations
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-from dtd.recorder import Row
+from dtd.training.recorder import Row
 
 
 class TrainingProgress:

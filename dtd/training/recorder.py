@@ -6,8 +6,8 @@ import csv
 import io
 from collections.abc import Sequence
 
-from dtd.atomic import write_text_atomic
-from dtd.run_dir import RunDir
+from dtd.training.atomic import write_text_atomic
+from dtd.training.run_dir import RunDir
 
 # Columns every run has, in this order; others (losses, ...) follow alphabetically.
 LEADING_COLUMNS = (

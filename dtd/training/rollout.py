@@ -8,9 +8,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from dtd.agent import Agent
-from dtd.envs import EnvSpec
-from dtd.records import Episodes
+from dtd.agents.interface import Agent
+from dtd.agents.records import Episodes
+from dtd.envs.spec import EnvSpec
 
 StepHook = Callable[[int, np.ndarray], None]
 """Called with t and the (B, goal_dim) goals the policy pursues from the state at t: before

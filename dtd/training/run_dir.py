@@ -17,9 +17,9 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from dtd.atomic import write_text_atomic
 from dtd.config import TrainConfig
 from dtd.errors import ConfigError, RunDirError
+from dtd.training.atomic import write_text_atomic
 
 CHECKPOINT_NAMES = ("latest", "best", "first")
 """Checkpoints every run keeps: after the last epoch, of the best evaluation, after the first."""

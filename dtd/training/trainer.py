@@ -15,15 +15,15 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from dtd.agent import Agent
-from dtd.checkpoint import restoring, save_atomic
-from dtd.collector import Collector, env_rng_states, restore_env_rng_states
+from dtd.agents.interface import Agent
 from dtd.config import TrainConfig
-from dtd.envs import EnvSpec
-from dtd.progress import TrainingProgress
-from dtd.recorder import MetricsRecorder, Row
-from dtd.rollout import concatenate, episode_figures, run_many
-from dtd.run_dir import RunDir
+from dtd.envs.spec import EnvSpec
+from dtd.training.checkpoint import restoring, save_atomic
+from dtd.training.collector import Collector, env_rng_states, restore_env_rng_states
+from dtd.training.progress import TrainingProgress
+from dtd.training.recorder import MetricsRecorder, Row
+from dtd.training.rollout import concatenate, episode_figures, run_many
+from dtd.training.run_dir import RunDir
 
 
 @dataclasses.dataclass

@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from dtd.config import Algo, TrainConfig
-from dtd.runs import evaluate_run, train
+from dtd.training.lifecycle import train
+from dtd.training.trained_run import evaluate_run
 
 pytestmark = pytest.mark.learning
 

@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 
 from dtd.config import Algo, LearnerConfig, TrainConfig
-from dtd.runs import epochs_recorded
-from dtd.sweep import run_sweep, sweep_trials
-from dtd.trials import Trial, run_local
+from dtd.experiments.sweep import run_sweep, sweep_trials
+from dtd.experiments.trials import Trial, run_local
+from dtd.training.lifecycle import epochs_recorded
 from tests.helpers import TINY, dtd, read_metrics
 
 pytestmark = pytest.mark.smoke

@@ -11,10 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dtd.envs import env_spec, make_env
-from dtd.heatmap import place_block_and_goal, run_heatmaps, table_of
-from dtd.hierarchy import DotToDotAgent
-from dtd.render import (
+from dtd.agents.dot_to_dot import DotToDotAgent
+from dtd.envs.make import make_env
+from dtd.envs.spec import env_spec
+from dtd.explain.heatmap import place_block_and_goal, run_heatmaps, table_of
+from dtd.explain.render import (
     DOT_RADIUS,
     GHOST_BESIDE,
     GOAL_RGBA,
@@ -25,7 +26,8 @@ from dtd.render import (
     goal_markers,
     render_episode,
 )
-from dtd.runs import close_all, load_run
+from dtd.training.components import close_all
+from dtd.training.trained_run import load_run
 from tests.helpers import TINY, dtd
 
 pytestmark = pytest.mark.smoke

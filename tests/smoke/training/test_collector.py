@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from dtd.collector import CollectorProcessError, InlineCollector, ProcessCollector
 from dtd.config import Algo, Collection, TrainConfig
-from dtd.runs import build, close_all
+from dtd.training.collector import CollectorProcessError, InlineCollector, ProcessCollector
+from dtd.training.components import build, close_all
 
 pytestmark = pytest.mark.smoke
 

@@ -82,8 +82,8 @@ def test_dtd_settings_are_checked(tmp_path):
 def test_a_trained_high_level_can_be_queried_at_any_sub_goal(push_dtd):
     import numpy as np
 
-    from dtd.hierarchy import DotToDotAgent
-    from dtd.runs import load_agent
+    from dtd.agents.dot_to_dot import DotToDotAgent
+    from dtd.training.trained_run import load_agent
 
     agent, env = load_agent(push_dtd)
     assert isinstance(agent, DotToDotAgent)

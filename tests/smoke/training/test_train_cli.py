@@ -119,7 +119,7 @@ def test_every_task_of_the_paper_trains(tmp_path, env_id, obs_dim, algo):
 
 def test_train_for_steps_resumes_up_to_a_larger_budget(tmp_path):
     from dtd.config import LearnerConfig
-    from dtd.runs import train_for_steps
+    from dtd.training.lifecycle import train_for_steps
 
     config = TrainConfig(
         env="FetchReach-v4", n_cycles=2, updates_per_cycle=2, test_episodes=1, buffer_size=5000,

@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from dtd.buffer import EpisodeBuffer
-from dtd.records import Episodes
+from dtd.agents.buffer import EpisodeBuffer
+from dtd.agents.records import Episodes
 
 T, OBS, GOAL, ACT = 4, 3, 2, 2
 

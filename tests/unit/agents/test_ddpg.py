@@ -7,15 +7,15 @@ import numpy as np
 import pytest
 import torch
 
-from dtd.agent import GoalConditionedAgent
-from dtd.buffer import EpisodeBuffer
-from dtd.checkpoint import load_checkpoint, save_atomic
+from dtd.agents.buffer import EpisodeBuffer
+from dtd.agents.ddpg import DDPGLearner
+from dtd.agents.exploration import ActionNoise
+from dtd.agents.flat import GoalConditionedAgent
+from dtd.agents.her import GoalStrategy
+from dtd.agents.networks import BoxActionHead
+from dtd.agents.records import Batch, Episodes
 from dtd.config import LearnerConfig
-from dtd.ddpg import DDPGLearner
-from dtd.exploration import ActionNoise
-from dtd.her import GoalStrategy
-from dtd.networks import BoxActionHead
-from dtd.records import Batch, Episodes
+from dtd.training.checkpoint import load_checkpoint, save_atomic
 
 OBS, GOAL, ACT, T = 5, 3, 2, 6
 SMALL = LearnerConfig(hidden_sizes=(32, 32), batch_size=16)

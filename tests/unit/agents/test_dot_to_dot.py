@@ -7,22 +7,22 @@ import numpy as np
 import pytest
 import torch
 
-from dtd.buffer import EpisodeBuffer
-from dtd.checkpoint import load_checkpoint, save_atomic
-from dtd.config import LearnerConfig
-from dtd.ddpg import DDPGLearner
-from dtd.envs import make_envs
-from dtd.exploration import ActionNoise
-from dtd.hierarchy import DotToDotAgent, HandOverSchedule, SubgoalExploration
-from dtd.networks import BoxActionHead, SubgoalHead
-from dtd.records import Episodes
-from dtd.segments import (
+from dtd.agents.buffer import EpisodeBuffer
+from dtd.agents.ddpg import DDPGLearner
+from dtd.agents.dot_to_dot import DotToDotAgent, HandOverSchedule, SubgoalExploration
+from dtd.agents.exploration import ActionNoise
+from dtd.agents.networks import BoxActionHead, SubgoalHead
+from dtd.agents.records import Episodes
+from dtd.agents.segments import (
     sample_segment_transitions,
     segment_bounds,
     segment_mean_reward,
     segment_of_step,
     segment_window_end,
 )
+from dtd.config import LearnerConfig
+from dtd.envs.make import make_envs
+from dtd.training.checkpoint import load_checkpoint, save_atomic
 
 T, OBS, GOAL, ACT = 10, 4, 3, 2
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from dtd.her import GoalStrategy, future_indices, relabel_probability, sample_transitions
-from dtd.records import Episodes
+from dtd.agents.her import GoalStrategy, future_indices, relabel_probability, sample_transitions
+from dtd.agents.records import Episodes
 
 T = 10
 

@@ -3,7 +3,7 @@
 import numpy as np
 import torch
 
-from dtd.normalizer import RunningNormalizer
+from dtd.agents.normalizer import RunningNormalizer
 
 
 def test_matches_numpy_over_several_batches():

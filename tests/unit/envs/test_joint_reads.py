@@ -4,8 +4,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from dtd.envs import make_env, register_robotics_envs
-from dtd.joint_reads import IndexedJointReads
+from dtd.envs.joint_reads import IndexedJointReads
+from dtd.envs.make import make_env, register_robotics_envs
 
 
 @pytest.mark.parametrize("env_id", ["FetchPush-v4", "FetchPickAndPlace-v4", "HandManipulateBlock-v1"])

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from dtd.curves import Curve, read_curve
 from dtd.errors import RunDirError
+from dtd.experiments.curves import Curve, read_curve
 
 
 def curve(success):

@@ -6,10 +6,12 @@ import numpy as np
 import pytest
 
 from dtd.config import Algo, Preset, TrainConfig
-from dtd.curves import Curve, band, quantile
 from dtd.errors import ConfigError, RunDirError
-from dtd.plots import find_runs, plot, summaries
-from dtd.run_dir import RunDir, write_config
+from dtd.experiments.curves import Curve, band, quantile
+from dtd.experiments.plots import plot
+from dtd.experiments.run_curves import find_runs
+from dtd.experiments.summary import summaries
+from dtd.training.run_dir import RunDir, write_config
 
 # eval success per epoch; epochs hold 1,000 env steps and 10 s each.
 HER = {

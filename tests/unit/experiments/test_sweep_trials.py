@@ -8,8 +8,8 @@ from rich.console import Console
 
 from dtd.config import Algo, Collection, TrainConfig
 from dtd.errors import ConfigError, DtdError
-from dtd.sweep import SweepProgress, sweep_trials, workers_for
-from dtd.trials import Trial, import_ray, sharing_cores
+from dtd.experiments.sweep import SweepProgress, sweep_trials, workers_for
+from dtd.experiments.trials import Trial, import_ray, sharing_cores
 
 
 def test_trials_are_ordered_seed_by_seed_from_the_first_seed(tmp_path):
@@ -43,7 +43,7 @@ def test_trials_running_together_share_the_cores():
 
 
 def test_workers_default_to_one_per_core_but_no_more_than_trials(tmp_path, monkeypatch):
-    monkeypatch.setattr("dtd.sweep.usable_cores", lambda: 4)
+    monkeypatch.setattr("dtd.experiments.sweep.usable_cores", lambda: 4)
     trials = [Trial(TrainConfig(env="FetchReach-v4"), tmp_path / str(n)) for n in range(3)]
     assert workers_for(trials, 0) == 3
     assert workers_for(trials * 2, 0) == 4
@@ -60,7 +60,7 @@ def test_without_ray_the_error_says_how_to_install_it(monkeypatch):
 
 def test_without_a_terminal_a_status_line_replaces_the_bar(tmp_path, monkeypatch):
     recorded = {}
-    monkeypatch.setattr("dtd.sweep.epochs_recorded", lambda run_dir: recorded.get(run_dir, 0))
+    monkeypatch.setattr("dtd.experiments.sweep.epochs_recorded", lambda run_dir: recorded.get(run_dir, 0))
     trials = [Trial(TrainConfig(env="FetchReach-v4", epochs=4), tmp_path / str(n)) for n in range(2)]
     log = io.StringIO()
     progress = SweepProgress(

@@ -2,7 +2,7 @@ import os
 import subprocess
 import sys
 
-from dtd.atomic import remove_stale_temporaries, write_text_atomic
+from dtd.training.atomic import remove_stale_temporaries, write_text_atomic
 
 
 def test_write_text_atomic_leaves_only_the_file(tmp_path):

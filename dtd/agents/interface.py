@@ -1,0 +1,69 @@
+"""What every agent offers the rollout and the trainer, and the mean of its update diagnostics."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any, Protocol
+
+import numpy as np
+
+from dtd.agents.records import Episodes
+
+
+class Agent(Protocol):
+    """What the rollout and the trainer need of an agent."""
+
+    def step_goal(
+        self,
+        obs: np.ndarray,
+        achieved_goal: np.ndarray,
+        desired_goal: np.ndarray,
+        t: int,
+        explore: bool,
+        rng: np.random.Generator,
+    ) -> np.ndarray:
+        """The goal the acting policy pursues at step t (a batch)."""
+        ...
+
+    def act(self, obs: np.ndarray, goal: np.ndarray, explore: bool, rng: np.random.Generator) -> np.ndarray:
+        """Actions for a batch, with exploration when ``explore``."""
+        ...
+
+    def store(self, episodes: Episodes, rng: np.random.Generator) -> None:
+        """Keep collected episodes for learning."""
+        ...
+
+    def train(self, updates: int, rng: np.random.Generator) -> dict[str, float]:
+        """Run ``updates`` gradient steps (then move the targets) and return mean diagnostics."""
+        ...
+
+    def episode_metrics(self, episodes: Episodes) -> dict[str, float]:
+        """Figures of collected episodes that only this kind of agent has (may be empty)."""
+        ...
+
+    def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
+        """Plain data of everything the agent learned (and, optionally, its replay)."""
+        ...
+
+    def acting_state(self) -> dict[str, Any]:
+        """Plain data of what exploring episodes need: a copy given it acts as this agent."""
+        ...
+
+    def load_acting_state(self, state: dict[str, Any]) -> None:
+        """Restore what :meth:`acting_state` returned."""
+        ...
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore what :meth:`state_dict` returned."""
+        ...
+
+
+def mean_metrics(per_update: Iterable[dict[str, float]]) -> dict[str, float]:
+    """The mean of each diagnostic over a series of updates (empty for no update)."""
+    totals: dict[str, float] = {}
+    count = 0
+    for metrics in per_update:
+        count += 1
+        for name, value in metrics.items():
+            totals[name] = totals.get(name, 0.0) + value
+    return {name: total / count for name, total in totals.items()}

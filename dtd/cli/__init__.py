@@ -1,0 +1,62 @@
+"""The ``dtd`` command line: every setting of :class:`dtd.config.TrainConfig` is an option.
+
+Each command's module imports the library only when the command runs, so that ``dtd --help``
+and a wrong option are answered without loading torch or MuJoCo.
+"""
+
+from __future__ import annotations
+
+import functools
+import sys
+
+import tyro
+
+from dtd.cli.explaining import evaluate, heatmap, render, report
+from dtd.cli.training import plot, sweep, train
+from dtd.config import Preset, preset_config
+from dtd.errors import DtdError
+
+
+def preset_named(argv: list[str]) -> Preset:
+    """The ``--preset`` given in ``argv`` (the last one), else ``tuned``; a name that is not a
+    preset is left for the parser to report."""
+    preset = Preset.tuned
+    for index, arg in enumerate(argv):
+        name, _, value = arg.partition("=")
+        if name != "--preset":
+            continue
+        value = value or (argv[index + 1] if index + 1 < len(argv) else "")
+        if value in Preset.__members__:
+            preset = Preset(value)
+    return preset
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the ``dtd`` command."""
+    args = sys.argv[1:] if argv is None else argv
+    # The preset supplies the defaults the other options override, so it is read first.
+    preset = preset_config(preset_named(args))
+    commands = {
+        "train": functools.partial(train, config=preset),
+        "sweep": functools.partial(sweep, config=preset),
+        "plot": plot,
+        "eval": evaluate,
+        "render": render,
+        "heatmap": heatmap,
+        "report": report,
+    }
+    try:
+        if args[:1] == ["sweep"] and any(arg == "--algo" or arg.startswith("--algo=") for arg in args):
+            raise DtdError("dtd sweep takes --algos (comma-separated), not --algo")
+        tyro.extras.subcommand_cli_from_dict(
+            commands,
+            prog="dtd",
+            description="Dot-to-Dot: train and explain goal-conditioned agents (DDPG, HER, DtD).",
+            args=args,
+        )
+    except DtdError as exc:
+        print(f"dtd: error: {exc}", file=sys.stderr)
+        sys.exit(2)
+    except KeyboardInterrupt:
+        print("dtd: interrupted; continue with dtd train --resume RUN_DIR", file=sys.stderr)
+        sys.exit(130)

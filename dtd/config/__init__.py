@@ -1,0 +1,43 @@
+"""The one typed source of configuration: defaults, ``--help`` text and logged settings.
+
+Every field's docstring is its help text on the command line. Facts that follow from the
+environment (dimensions, horizon, the default discount) live in :class:`dtd.envs.spec.EnvSpec`
+and are never written back here. This package imports nothing of dtd but its errors, so every
+part of dtd may use it.
+"""
+
+from dtd.config.presets import (
+    PAPER_SETTINGS,
+    flat_items,
+    preset_config,
+    with_algorithm_batch,
+    with_settings,
+)
+from dtd.config.settings import (
+    HIGH_LEVEL_DEFAULTS,
+    LOW_LEVEL_BATCH,
+    LOW_LEVEL_DEFAULTS,
+    Algo,
+    Collection,
+    LearnerConfig,
+    Preset,
+    RelabelWindow,
+    TrainConfig,
+)
+
+__all__ = [
+    "HIGH_LEVEL_DEFAULTS",
+    "LOW_LEVEL_BATCH",
+    "LOW_LEVEL_DEFAULTS",
+    "PAPER_SETTINGS",
+    "Algo",
+    "Collection",
+    "LearnerConfig",
+    "Preset",
+    "RelabelWindow",
+    "TrainConfig",
+    "flat_items",
+    "preset_config",
+    "with_algorithm_batch",
+    "with_settings",
+]

@@ -1,0 +1,93 @@
+"""Presets and settings by name: the reference (paper) settings, ``NAME=VALUE`` overrides, the
+flat view of a configuration by option names, and the algorithm's batch made concrete."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from typing import Any
+
+from dtd.config.settings import LOW_LEVEL_BATCH, Preset, TrainConfig
+from dtd.errors import ConfigError
+
+
+def with_algorithm_batch(config: TrainConfig) -> TrainConfig:
+    """``config`` with a low-level batch of 0 replaced by its algorithm's (``LOW_LEVEL_BATCH``)."""
+    if config.learner.batch_size:
+        return config
+    learner = dataclasses.replace(config.learner, batch_size=LOW_LEVEL_BATCH[config.algo])
+    return dataclasses.replace(config, learner=learner)
+
+
+def flat_items(config: TrainConfig) -> dict[str, Any]:
+    """Settings keyed by their option names without dashes: the low level's learner settings
+    unprefixed, the high level's as ``high.<name>``."""
+    flat = config.to_dict()
+    flat.update(flat.pop("learner"))
+    flat.update({f"high.{name}": value for name, value in flat.pop("high").items()})
+    return flat
+
+
+PAPER_SETTINGS: dict[str, Any] = {
+    "n_cycles": 50,
+    "episodes_per_cycle": 2,
+    "updates_per_cycle": 40,
+    "test_episodes": 10,
+    "buffer_size": 1_000_000,
+    "replay_k": 4,
+    "past_goal_share": 0.0,
+    "noise_eps": 0.2,
+    "random_eps": 0.3,
+    "learner.hidden_sizes": [256, 256, 256],
+    "learner.layer_norm": False,
+    "learner.actor_lr": 1e-3,
+    "learner.critic_lr": 1e-3,
+    "learner.batch_size": 256,
+    "learner.polyak": 0.95,
+    "learner.action_l2": 1.0,
+    "learner.gamma": None,
+    "learner.clip_return": True,
+    "learner.norm_clip": 5.0,
+    "learner.obs_clip": 200.0,
+    "learner.norm_eps": 0.01,
+    "segments": 2,
+    "subgoal_sigma": 0.05,
+    # Dot-to-Dot as the paper describes it: near goals for the low level, both levels
+    # updated alike in each training phase.
+    "low_relabel_window": "segment",
+    "high_updates_per_cycle": 40,
+}
+"""The reference settings (HER's, which the paper keeps) by their ``with_settings`` names."""
+
+
+def preset_config(preset: Preset, **settings: Any) -> TrainConfig:
+    """The configuration ``preset`` starts from, with ``settings`` (fields) on top."""
+    config = TrainConfig(preset=preset)
+    if preset is Preset.paper:
+        config = with_settings(
+            config, [f"{name}={json.dumps(value)}" for name, value in PAPER_SETTINGS.items()]
+        )
+    return dataclasses.replace(config, **settings)
+
+
+def with_settings(config: TrainConfig, settings: list[str]) -> TrainConfig:
+    """``config`` with ``NAME=VALUE`` settings applied: NAME is a field of TrainConfig (a
+    learner's as ``learner.<name>`` or ``high.<name>``), VALUE is JSON, or else a string."""
+    data = config.to_dict()
+    for setting in settings:
+        name, equals, value = setting.partition("=")
+        if not equals or not name:
+            raise ConfigError(f"a setting is NAME=VALUE, got {setting!r}")
+        *parents, leaf = name.replace("-", "_").split(".")
+        target = data
+        for parent in parents:
+            if not isinstance(target.get(parent), dict):
+                raise ConfigError(f"unknown setting {name!r}")
+            target = target[parent]
+        if leaf not in target:
+            raise ConfigError(f"unknown setting {name!r}")
+        try:
+            target[leaf] = json.loads(value)
+        except json.JSONDecodeError:
+            target[leaf] = value
+    return TrainConfig.from_dict(data)

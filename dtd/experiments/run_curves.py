@@ -1,0 +1,82 @@
+"""Runs found on disk with their learning curves: grouped by environment and algorithm, and cut
+at an env-step budget to compare runs of different lengths."""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+
+from dtd.config import Collection, Preset, TrainConfig
+from dtd.errors import ConfigError, RunDirError
+from dtd.experiments.curves import Curve, read_curve
+from dtd.training.run_dir import RunDir, read_config
+
+
+@dataclasses.dataclass(frozen=True)
+class RunCurve:
+    """One run found on disk: where it is, what it trained, and its curve."""
+
+    run_dir: Path
+    env: str
+    label: str
+    """The algorithm, with `` (preset)`` where the preset is not the tuned default."""
+    curve: Curve
+
+
+def find_runs(directories: Sequence[Path]) -> list[RunCurve]:
+    """Every run under ``directories`` that has finished at least one epoch, sorted by path.
+
+    Two runs with the same settings but for the epoch budget (and where episodes are collected,
+    a matter of speed only) are one trial found twice, say a copy of an unfinished run beside
+    the run itself: the one with the most epochs counts, and a warning names the other.
+    """
+    run_dirs: set[Path] = set()
+    for directory in map(Path, directories):
+        if not directory.is_dir():
+            raise RunDirError(f"{directory} is not a directory")
+        run_dirs.update(path.resolve().parent for path in directory.rglob("config.json"))
+    trials: dict[TrainConfig, RunCurve] = {}
+    for run_dir in sorted(run_dirs):
+        config = read_config(RunDir(run_dir))
+        curve = read_curve(run_dir)
+        if len(curve) == 0:
+            continue
+        label = config.algo.value
+        if config.preset is not Preset.tuned:
+            label += f" ({config.preset.value})"
+        run = RunCurve(run_dir, config.env or "?", label, curve)
+        trial = dataclasses.replace(config, epochs=0, collector=Collection.auto)
+        if trial in trials:
+            kept, dropped = sorted([trials[trial], run], key=lambda r: len(r.curve), reverse=True)
+            warnings.warn(
+                f"{dropped.run_dir} repeats the trial in {kept.run_dir} ({len(dropped.curve)} "
+                f"against {len(kept.curve)} epochs); only the longer one counts",
+                stacklevel=2,
+            )
+            run = kept
+        trials[trial] = run
+    return sorted(trials.values(), key=lambda run: run.run_dir)
+
+
+def grouped(runs: Sequence[RunCurve]) -> dict[str, dict[str, list[Curve]]]:
+    """Curves by environment, then by label (both in sorted order)."""
+    groups: dict[str, dict[str, list[Curve]]] = {}
+    for run in sorted(runs, key=lambda run: (run.env, _label_order(run.label), str(run.run_dir))):
+        groups.setdefault(run.env, {}).setdefault(run.label, []).append(run.curve)
+    return groups
+
+
+def cut_at(runs: Sequence[RunCurve], env_steps: float) -> list[RunCurve]:
+    """``runs`` as they were at ``env_steps``, to compare them at one budget; a run with no
+    epoch that early is left out."""
+    if not env_steps > 0:
+        raise ConfigError(f"--max-env-steps must be a positive number of env steps, got {env_steps}")
+    cut = [dataclasses.replace(run, curve=run.curve.up_to(env_steps)) for run in runs]
+    return [run for run in cut if len(run.curve) > 0]
+
+
+def _label_order(label: str) -> tuple[int, str]:
+    order = {"ddpg": 0, "her": 1, "dtd": 2}
+    return order.get(label.split(" ")[0], 3), label

@@ -1,0 +1,108 @@
+"""A trained run brought back from its directory: its agent restored from a checkpoint, and
+deterministic evaluation episodes of it."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+
+from dtd.agents.dot_to_dot import DotToDotAgent
+from dtd.agents.interface import Agent
+from dtd.config import Algo, Collection, TrainConfig
+from dtd.errors import ConfigError
+from dtd.training.checkpoint import check_checkpoint, load_checkpoint, restoring
+from dtd.training.components import Components, build, close_all
+from dtd.training.rollout import episode_figures, run_many
+from dtd.training.run_dir import RunDir, read_config
+
+
+@dataclasses.dataclass
+class LoadedRun:
+    """A trained run brought back: its settings, checkpoint and rebuilt components."""
+
+    run: RunDir
+    config: TrainConfig
+    checkpoint: Path
+    snapshot: dict[str, Any]
+    components: Components
+
+
+EVAL_SEED = 1_000_003
+"""Seed of evaluation episodes after training, apart from every seed a run trains with."""
+
+
+def load_run(
+    run_dir: Path | str, checkpoint: str = "latest", seed: int = EVAL_SEED, envs: int = 1
+) -> LoadedRun:
+    """Rebuild a run's agent from a checkpoint, with ``envs`` evaluation environments seeded
+    by ``seed``; raises :class:`DtdError` subclasses for missing or foreign files."""
+    run = RunDir(Path(run_dir))
+    config = read_config(run)
+    path = run.checkpoint(checkpoint)
+    snapshot = load_checkpoint(path)
+    components = build(config, eval_seed=seed, eval_envs=envs, collection=Collection.inline)
+    try:
+        check_checkpoint(snapshot, config, components.spec, path)
+        with restoring(path):
+            components.agent.load_state_dict({k: v for k, v in snapshot["agent"].items() if k != "buffer"})
+    except BaseException:
+        close_all(components)
+        raise
+    return LoadedRun(run, config, path, snapshot, components)
+
+
+def load_agent(run_dir: Path | str, checkpoint: str = "latest") -> tuple[Agent, gym.Env]:
+    """A trained agent and an environment of its task, e.g. to query ``subgoal_values``."""
+    loaded = load_run(Path(run_dir), checkpoint)
+    loaded.components.collector.close()
+    return loaded.components.agent, loaded.components.eval_envs[0]
+
+
+def evaluate_run(
+    run_dir: Path | str,
+    episodes: int = 100,
+    checkpoint: str = "latest",
+    seed: int = EVAL_SEED,
+    show_subgoals: bool = False,
+) -> dict[str, Any]:
+    """Deterministic episodes of a trained agent; the figures as a dict (with ``plans``, the
+    high level's sub-goals per episode, when ``show_subgoals``)."""
+    if episodes < 1:
+        raise ConfigError(f"--episodes must be at least 1, got {episodes}")
+    config = read_config(RunDir(Path(run_dir)))
+    if show_subgoals and config.algo is not Algo.dtd:
+        raise ConfigError(f"--show-subgoals needs a dtd run; {run_dir} is a {config.algo.value} run")
+    loaded = load_run(run_dir, checkpoint, seed, envs=min(episodes, 10))
+    components = loaded.components
+    try:
+        played = run_many(
+            components.eval_envs,
+            components.agent,
+            components.spec,
+            episodes,
+            explore=False,
+            rng=components.rng,
+        )
+    finally:
+        close_all(components)
+    figures = episode_figures(components.agent, played)
+    result: dict[str, Any] = {
+        "run_dir": str(loaded.run.root),
+        "checkpoint": str(loaded.checkpoint),
+        "env": config.env,
+        "algo": config.algo.value,
+        "epoch": loaded.snapshot["state"]["epoch"],
+        "env_steps": loaded.snapshot["state"]["env_steps"],
+        "episodes": episodes,
+        "seed": seed,
+        "success_rate": figures.pop("success"),
+        "mean_final_distance": figures.pop("final_distance"),
+        **figures,
+    }
+    if show_subgoals:
+        assert isinstance(components.agent, DotToDotAgent)
+        result["plans"] = components.agent.plan(played)
+    return result
