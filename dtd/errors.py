@@ -19,3 +19,8 @@ class RunDirError(DtdError):
 
 class CheckpointError(DtdError):
     """A checkpoint that is missing, corrupt, or belongs to another run."""
+
+
+class MachineError(Exception):
+    """A failure of the machine rather than of the input (a full disk, an I/O error), reported
+    as one line with the operating system's reason; the command line exits 1."""

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import os
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
+
+import pytest
 
 # A budget that exercises every part of training in about a second per epoch.
 TINY = [
@@ -34,3 +39,31 @@ def read_metrics(run_dir: Path) -> list[dict[str, str]]:
 def without_times(rows: list[dict[str, str]]) -> list[dict[str, str]]:
     """Rows minus the wall-clock column, for comparing runs."""
     return [{k: v for k, v in row.items() if k != "wall_s"} for row in rows]
+
+
+@contextlib.contextmanager
+def read_only(folder: Path) -> Iterator[None]:
+    """Make ``folder`` read-only for this process while inside: a read-only bind mount where we
+    are root (whom file modes do not stop), else file modes."""
+    if os.geteuid() != 0:
+        modes = {path: path.stat().st_mode for path in [folder, *folder.rglob("*")]}
+        for path in modes:
+            path.chmod(modes[path] & ~0o222)
+        try:
+            yield
+        finally:
+            for path, mode in modes.items():
+                path.chmod(mode)
+        return
+    mounted = subprocess.run(["mount", "--bind", str(folder), str(folder)], capture_output=True, text=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot make {folder} read-only here: {mounted.stderr.strip()}")
+    try:
+        remounted = subprocess.run(
+            ["mount", "-o", "remount,bind,ro", str(folder)], capture_output=True, text=True
+        )
+        if remounted.returncode != 0:
+            pytest.skip(f"cannot make {folder} read-only here: {remounted.stderr.strip()}")
+        yield
+    finally:
+        subprocess.run(["umount", str(folder)], check=True)

@@ -227,8 +227,9 @@ class DotToDotAgent:
         }
 
     def plan(self, episodes: Episodes) -> list[dict[str, Any]]:
-        """Per episode: the start, each segment's sub-goal and what was reached, the goal."""
-        return [episode_plan(episodes, index, self.bounds) for index in range(episodes.count)]
+        """Per episode: the start, each segment's sub-goal, where the segment ended and whether
+        it reached the sub-goal, the goal."""
+        return [episode_plan(episodes, index, self.bounds, self.reward_fn) for index in range(episodes.count)]
 
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
         state: dict[str, Any] = {"low": self.low.state_dict(), "high": self.high.state_dict()}

@@ -110,14 +110,21 @@ def sample_segment_transitions(
     )
 
 
-def episode_plan(episodes: Episodes, index: int, bounds: np.ndarray | None) -> dict[str, Any]:
-    """Episode ``index``'s plan: the start, each segment's sub-goal and what was reached at the
-    segment's end (none without ``bounds``), the goal, the final achieved goal, success."""
+def episode_plan(
+    episodes: Episodes, index: int, bounds: np.ndarray | None, reward_fn: RewardFn | None = None
+) -> dict[str, Any]:
+    """Episode ``index``'s plan: the start; each segment's sub-goal, the achieved goal at the
+    segment's end and whether that reached the sub-goal by the task's own reward (none without
+    ``bounds``; no verdicts without ``reward_fn``); the goal, the final achieved goal, success."""
     achieved = episodes.achieved_goal[index]
+    subgoals = np.zeros((0, achieved.shape[-1])) if bounds is None else episodes.step_goal[index, bounds[:-1]]
+    ends = achieved[bounds[1:]] if bounds is not None else np.zeros_like(subgoals)
+    reached = [] if reward_fn is None or bounds is None else (reward_fn(ends, subgoals) == 0.0).tolist()
     return {
         "start": achieved[0].tolist(),
-        "subgoals": [] if bounds is None else episodes.step_goal[index, bounds[:-1]].tolist(),
-        "reached": [] if bounds is None else achieved[bounds[1:]].tolist(),
+        "subgoals": subgoals.tolist(),
+        "segment_ends": ends.tolist(),
+        "reached": reached,
         "goal": episodes.desired_goal[index].tolist(),
         "final": achieved[-1].tolist(),
         "success": bool(episodes.success[index]),

@@ -14,7 +14,7 @@ import tyro
 from dtd.cli.explaining import evaluate, heatmap, render, report
 from dtd.cli.training import plot, sweep, train
 from dtd.config import Preset, preset_config
-from dtd.errors import DtdError
+from dtd.errors import DtdError, MachineError
 
 
 def preset_named(argv: list[str]) -> Preset:
@@ -57,6 +57,18 @@ def main(argv: list[str] | None = None) -> None:
     except DtdError as exc:
         print(f"dtd: error: {exc}", file=sys.stderr)
         sys.exit(2)
-    except KeyboardInterrupt:
-        print("dtd: interrupted; continue with dtd train --resume RUN_DIR", file=sys.stderr)
+    except MachineError as exc:
+        print(f"dtd: error: {exc}", file=sys.stderr)
+        sys.exit(1)
+    except KeyboardInterrupt as exc:
+        print(f"dtd: interrupted{_how_to_continue(args, exc)}", file=sys.stderr)
         sys.exit(130)
+
+
+def _how_to_continue(args: list[str], interrupt: KeyboardInterrupt) -> str:
+    run_dir = getattr(interrupt, "run_dir", None)
+    if run_dir is not None:
+        return f"; continue with dtd train --resume {run_dir}"
+    if args[:1] == ["sweep"]:
+        return "; run the same dtd sweep again to continue"
+    return ""

@@ -160,7 +160,12 @@ def format_plan(number: int, plan: dict) -> str:
         f"episode {number}: {'success' if plan['success'] else 'failure'}",
         f"  start    {point(plan['start'])}",
     ]
-    for segment, (subgoal, reached) in enumerate(zip(plan["subgoals"], plan["reached"], strict=True)):
-        lines.append(f"  segment {segment}: sub-goal {point(subgoal)}  reached {point(reached)}")
+    for segment, (subgoal, end, reached) in enumerate(
+        zip(plan["subgoals"], plan["segment_ends"], plan["reached"], strict=True)
+    ):
+        verdict = "yes" if reached else "no"
+        lines.append(
+            f"  segment {segment}: sub-goal {point(subgoal)}  reached: {verdict}, ended at {point(end)}"
+        )
     lines.append(f"  goal     {point(plan['goal'])}")
     return "\n".join(lines)

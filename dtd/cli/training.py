@@ -35,9 +35,17 @@ def train(
         force: Replace a run that already exists in --run-dir.
         progress: Show a live progress bar.
     """
+    from dtd.training.lifecycle import epochs_recorded
     from dtd.training.lifecycle import train as train_run
 
+    before = epochs_recorded(resume) if resume is not None else 0
     state = train_run(config, run_dir=run_dir, resume=resume, force=force, show_progress=progress)
+    if resume is not None and state.epoch <= before:
+        print(
+            f"dtd: {resume} has already trained {state.epoch} epochs; nothing to do "
+            f"(--epochs N with N > {state.epoch} trains it further)",
+            file=sys.stderr,
+        )
     last = state.history[-1] if state.history else {}
     print(
         json.dumps(
@@ -90,12 +98,14 @@ def sweep(
     from dtd.experiments.run_curves import find_runs
     from dtd.experiments.summary import summaries, summary_table
     from dtd.experiments.sweep import run_sweep, sweep_trials
+    from dtd.training.atomic import ensure_writable
 
     try:
         chosen = [Algo(name.strip()) for name in algos.split(",") if name.strip()]
     except ValueError as exc:
         raise ConfigError(f"--algos: {exc}; choose from {', '.join(a.value for a in Algo)}") from exc
     trials = sweep_trials(config, chosen, seeds, out)
+    ensure_writable(out, "the sweep's runs")
     outcomes = run_sweep(trials, workers=workers, ray_address=ray, show_progress=progress)
     failed = [outcome for outcome in outcomes if not outcome.ok]
     for outcome in failed:
@@ -112,12 +122,14 @@ def plot(
     run_dirs: tyro.conf.Positional[tuple[Path, ...]],
     out: Path | None = None,
     max_env_steps: int | None = None,
+    strict: bool = False,
 ) -> None:
     """Draw success against epochs and env steps per environment, and write summary.csv.
 
     Every run found under RUN_DIRS (any folder with a config.json) counts; runs are grouped
     by environment and algorithm (and preset, where not the default). Lines are the mean over
-    seeds, bands the 25th-75th percentile.
+    seeds, bands the 25th-75th percentile. A run whose files cannot be read is left out
+    with a warning naming it; the others are drawn.
 
     Examples:
       dtd plot runs/push-sweep
@@ -128,8 +140,10 @@ def plot(
         run_dirs: Sweep or run directories to read.
         out: Where the figures (PNG and SVG per environment) and summary.csv go (default: the first RUN_DIR).
         max_env_steps: Compare runs at this budget: each curve ends at its last epoch within it (None: all).
+        strict: Exit with status 1 when a run was left out because its files cannot be read.
     """
     from dtd.experiments.plots import plot as draw_plots
+    from dtd.experiments.run_curves import UnreadableRun
 
     if not run_dirs:
         raise DtdError("give at least one directory of runs")
@@ -141,3 +155,5 @@ def plot(
     print(result.table)
     for path in [*result.figures, result.summary_csv]:
         print(f"wrote {path}")
+    if strict and any(issubclass(warning.category, UnreadableRun) for warning in caught):
+        sys.exit(1)

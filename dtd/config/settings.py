@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import types
+import typing
 from typing import Any
 
 import tyro
@@ -191,35 +193,54 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
-        """Inverse of :meth:`to_dict`; unknown keys are an error, missing keys take defaults."""
-        data = dict(data)
-        _reject_unknown(cls, data)
-        learners = {
-            name: _learner_from_dict(data.pop(name), default)
-            for name, default in (("learner", LOW_LEVEL_DEFAULTS), ("high", HIGH_LEVEL_DEFAULTS))
-            if name in data
-        }
-        enums = (
-            ("algo", Algo),
-            ("preset", Preset),
-            ("low_relabel_window", RelabelWindow),
-            ("collector", Collection),
-        )
-        for name, kind in enums:
-            if name in data:
-                try:
-                    data[name] = kind(data[name])
-                except ValueError as exc:
-                    raise ConfigError(f"unknown {name} {data[name]!r}") from exc
-        return cls(**data, **learners)
+        """Inverse of :meth:`to_dict`; unknown keys and values of the wrong type are a
+        :class:`ConfigError` naming the setting, missing keys take defaults."""
+        return cls(**_typed_fields(cls, data, ""))
 
 
-def _learner_from_dict(data: dict[str, Any], default: LearnerConfig) -> LearnerConfig:
-    data = dict(data)
-    _reject_unknown(LearnerConfig, data)
-    if "hidden_sizes" in data:
-        data["hidden_sizes"] = tuple(data["hidden_sizes"])
-    return dataclasses.replace(default, **data)
+def _typed_fields(cls: type, data: Any, prefix: str) -> dict[str, Any]:
+    """The fields of dataclass ``cls`` in ``data``, each checked against its type."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{prefix.rstrip('.') or 'the configuration'} must be a mapping of settings")
+    _reject_unknown(cls, data)
+    hints = typing.get_type_hints(cls)
+    return {name: _typed(prefix + name, value, hints[name]) for name, value in data.items()}
+
+
+def _typed(name: str, value: Any, kind: Any) -> Any:
+    """``value`` as a value of type ``kind`` (a JSON list becomes a tuple, an int a float), or
+    :class:`ConfigError` naming the setting."""
+    if typing.get_origin(kind) in (typing.Union, types.UnionType):
+        options = [option for option in typing.get_args(kind) if option is not type(None)]
+        if value is None and len(options) < len(typing.get_args(kind)):
+            return None
+        (kind,) = options
+    if kind is LearnerConfig:
+        default = HIGH_LEVEL_DEFAULTS if name == "high" else LOW_LEVEL_DEFAULTS
+        return dataclasses.replace(default, **_typed_fields(LearnerConfig, value, f"{name}."))
+    if isinstance(kind, type) and issubclass(kind, enum.Enum):
+        try:
+            return kind(value)
+        except ValueError as exc:
+            raise ConfigError(f"unknown {name} {value!r}") from exc
+    if typing.get_origin(kind) is tuple:
+        if isinstance(value, list | tuple) and all(_is_int(item) for item in value):
+            return tuple(value)
+        raise ConfigError(f"{name} must be a list of integers, got {value!r}")
+    checks = {
+        bool: (lambda v: isinstance(v, bool), "true or false"),
+        int: (_is_int, "an integer"),
+        float: (lambda v: _is_int(v) or isinstance(v, float), "a number"),
+        str: (lambda v: isinstance(v, str), "a string"),
+    }
+    accepts, expected = checks[kind]
+    if not accepts(value):
+        raise ConfigError(f"{name} must be {expected}, got {value!r}")
+    return float(value) if kind is float else value
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 def _plain(value: Any) -> Any:

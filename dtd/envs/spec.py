@@ -82,6 +82,7 @@ def env_spec(env: gym.Env, env_id: str) -> EnvSpec:
         quaternion=quaternion,
     )
     _check_batched_reward(env, spec)
+    _check_success_reported(env, spec)
     return spec
 
 
@@ -134,6 +135,17 @@ def _check_batched_reward(env: gym.Env, spec: EnvSpec) -> None:
     if rewards.shape != (2,):
         raise EnvError(
             f"environment {spec.env_id!r}: compute_reward must return one reward per goal of a batch"
+        )
+
+
+def _check_success_reported(env: gym.Env, spec: EnvSpec) -> None:
+    # Success is the task's own verdict at the last step; without it every episode would count 0.
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(np.zeros(env.action_space.shape, dtype=env.action_space.dtype))
+    if "is_success" not in info:
+        raise EnvError(
+            f"environment {spec.env_id!r} does not report info['is_success'], which is what dtd "
+            "counts as success"
         )
 
 

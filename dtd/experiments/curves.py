@@ -63,19 +63,39 @@ class Curve:
 
 
 def read_curve(run_dir: Path) -> Curve:
-    """The curve of the run in ``run_dir`` (empty if it has not finished an epoch)."""
+    """The curve of the run in ``run_dir`` (empty if it has not finished an epoch); a
+    metrics.csv that is not text, lacks a column or holds a truncated or malformed row is a
+    :class:`RunDirError` naming the file and the line."""
     run = RunDir(Path(run_dir))
     if not run.metrics.exists():
         if not run.config.exists():
             raise RunDirError(f"{run.root} holds no run (no config.json)")
         return Curve(*(np.zeros(0) for _ in range(4)))
-    with open(run.metrics, newline="") as file:
-        rows = list(csv.DictReader(file))
     columns = ("epoch", "env_steps", "wall_s", "eval_success")
     try:
-        return Curve(*(np.array([float(row[name]) for row in rows]) for name in columns))
-    except (KeyError, ValueError) as exc:
-        raise RunDirError(f"{run.metrics} is not a dtd metrics file: {exc}") from exc
+        with open(run.metrics, newline="", encoding="utf-8") as file:
+            reader = csv.DictReader(file)
+            missing = [name for name in columns if name not in (reader.fieldnames or [])]
+            if missing:
+                raise RunDirError(f"{run.metrics} is not a dtd metrics file (no {', '.join(missing)} column)")
+            values: list[list[float]] = []
+            for row in reader:
+                if None in row or None in row.values():
+                    fields = sum(value is not None for key, value in row.items() if key is not None)
+                    fields += len(row.get(None) or [])  # type: ignore[call-overload]
+                    raise RunDirError(
+                        f"{run.metrics} line {reader.line_num} has {fields} fields where the header "
+                        f"has {len(reader.fieldnames or [])} (a truncated or malformed row)"
+                    )
+                values.append([float(row[name]) for name in columns])
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise RunDirError(f"{run.metrics} is not a dtd metrics file ({exc})") from exc
+    except ValueError as exc:
+        raise RunDirError(
+            f"{run.metrics} line {reader.line_num} holds a value that is not a number ({exc})"
+        ) from exc
+    table = np.array(values, dtype=float).reshape(-1, len(columns))
+    return Curve(*(table[:, column] for column in range(len(columns))))
 
 
 def quantile(values: np.ndarray, q: float) -> float:

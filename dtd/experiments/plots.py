@@ -19,7 +19,7 @@ from dtd.errors import RunDirError
 from dtd.experiments.curves import Curve, band
 from dtd.experiments.run_curves import cut_at, find_runs, grouped
 from dtd.experiments.summary import summaries, summary_csv, summary_table
-from dtd.training.atomic import write_text_atomic
+from dtd.training.atomic import ensure_writable, write_text_atomic
 
 _COLOURS = {"ddpg": "tab:green", "her": "tab:blue", "dtd": "tab:red"}
 
@@ -31,6 +31,7 @@ def draw(env: str, labels: dict[str, list[Curve]], path_stem: Path) -> list[Path
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     figure, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True, layout="constrained")
     faint = False
@@ -49,6 +50,7 @@ def draw(env: str, labels: dict[str, list[Curve]], path_stem: Path) -> list[Path
                 axis.plot(x[start:], stats.mean[start:], color=colour, ls=style["linestyle"], alpha=0.35)
             axis.fill_between(x, stats.low, stats.high, color=colour, alpha=0.2, linewidth=0)
     axes[0].set_xlabel("epoch")
+    axes[0].xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
     axes[1].set_xlabel("env steps")
     axes[0].set_ylabel("eval success rate")
     for axis in axes:
@@ -87,6 +89,7 @@ def plot(directories: Sequence[Path], out: Path, max_env_steps: float | None = N
             f"no run with a finished epoch{budget} under "
             + ", ".join(str(directory) for directory in directories)
         )
+    ensure_writable(Path(out), "the figures")
     figures = []
     for env, labels in grouped(runs).items():
         figures += draw(env, labels, Path(out) / env.split(":")[-1])

@@ -14,6 +14,10 @@ from dtd.experiments.curves import Curve, read_curve
 from dtd.training.run_dir import RunDir, read_config
 
 
+class UnreadableRun(UserWarning):
+    """A run left out of the figures because its files cannot be read."""
+
+
 @dataclasses.dataclass(frozen=True)
 class RunCurve:
     """One run found on disk: where it is, what it trained, and its curve."""
@@ -30,7 +34,9 @@ def find_runs(directories: Sequence[Path]) -> list[RunCurve]:
 
     Two runs with the same settings but for the epoch budget (and where episodes are collected,
     a matter of speed only) are one trial found twice, say a copy of an unfinished run beside
-    the run itself: the one with the most epochs counts, and a warning names the other.
+    the run itself: the one with the most epochs counts, and a warning names the other. A run
+    whose config.json or metrics.csv cannot be read is left out with an
+    :class:`UnreadableRun` warning naming it and why.
     """
     run_dirs: set[Path] = set()
     for directory in map(Path, directories):
@@ -39,8 +45,12 @@ def find_runs(directories: Sequence[Path]) -> list[RunCurve]:
         run_dirs.update(path.resolve().parent for path in directory.rglob("config.json"))
     trials: dict[TrainConfig, RunCurve] = {}
     for run_dir in sorted(run_dirs):
-        config = read_config(RunDir(run_dir))
-        curve = read_curve(run_dir)
+        try:
+            config = read_config(RunDir(run_dir))
+            curve = read_curve(run_dir)
+        except RunDirError as exc:
+            warnings.warn(UnreadableRun(f"skipped {run_dir}: {exc}"), stacklevel=2)
+            continue
         if len(curve) == 0:
             continue
         label = config.algo.value

@@ -169,6 +169,7 @@ def run_heatmaps(
     ``out``. Heights default to the block's resting height, and for tasks whose goals may lie
     in the air (FetchPickAndPlace) also 10, 20 and 30 cm above it."""
     from dtd.config import Algo
+    from dtd.training.atomic import ensure_writable
     from dtd.training.components import close_all
     from dtd.training.run_dir import RunDir, read_config
     from dtd.training.trained_run import load_run
@@ -180,6 +181,7 @@ def run_heatmaps(
         )
     if not checkpoints:
         raise ConfigError("--checkpoint names no checkpoint")
+    ensure_writable(Path(out).parent, "the heatmap")
     rows: list[tuple[str, list[Heatmap]]] = []
     table = None
     for name in checkpoints:

@@ -261,7 +261,7 @@ def render_run(
 
     from dtd.agents.dot_to_dot import DotToDotAgent
     from dtd.errors import ConfigError
-    from dtd.training.atomic import write_text_atomic
+    from dtd.training.atomic import ensure_writable, write_text_atomic
     from dtd.training.components import close_all
     from dtd.training.trained_run import load_run
 
@@ -269,6 +269,7 @@ def render_run(
         raise ConfigError(f"--episodes must be at least 1, got {episodes}")
     if width < 16 or height < 16:
         raise ConfigError(f"--width and --height must be at least 16, got {width}x{height}")
+    ensure_writable(Path(out), "rendered episodes")
     loaded = load_run(Path(run_dir), checkpoint, seed, envs=1)
     components = loaded.components
     env, agent, spec = components.eval_envs[0], components.agent, components.spec
@@ -287,7 +288,9 @@ def render_run(
                 RenderedFiles(
                     write_video(rendered.frames, Path(out) / f"{name}.mp4"),
                     write_strip(rendered, Path(out) / f"{name}-keyframes.png", title),
-                    episode_plan(rendered.episode, 0, bounds),
+                    agent.plan(rendered.episode)[0]
+                    if isinstance(agent, DotToDotAgent)
+                    else episode_plan(rendered.episode, 0, None),
                 )
             )
     finally:

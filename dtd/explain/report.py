@@ -15,7 +15,7 @@ from typing import Any
 
 from dtd.config import Algo, flat_items
 from dtd.experiments.curves import Curve, read_curve
-from dtd.training.atomic import write_text_atomic
+from dtd.training.atomic import ensure_writable, write_text_atomic
 from dtd.training.run_dir import RunDir, read_config
 
 ASSETS = "report"
@@ -83,6 +83,8 @@ def write_report(
     run = RunDir(Path(run_dir))
     config = read_config(run)
     assets_dir = run.root / ASSETS
+    ensure_writable(run.root, "the report")
+    ensure_writable(assets_dir, "the report's files")
     assets: list[Path] = []
     curve = read_curve(run.root)
     sections = [_header(run, config, curve), _settings(config)]
@@ -179,13 +181,15 @@ def _plans_table(plans: list[dict[str, Any]]) -> str:
     def point(values: list[float]) -> str:
         return "(" + ", ".join(f"{v:.3f}" for v in values) + ")"
 
-    head = "<tr><th>episode</th><th>start</th><th>sub-goals (reached at segment end)</th><th>goal</th>"
+    head = "<tr><th>episode</th><th>start</th><th>sub-goals (where the segment ended)</th><th>goal</th>"
     head += "<th>final</th><th>outcome</th></tr>"
     rows = []
     for number, plan in enumerate(plans, start=1):
         steps = "<br>".join(
-            f"{n + 1}: {point(subgoal)} ({point(reached)})"
-            for n, (subgoal, reached) in enumerate(zip(plan["subgoals"], plan["reached"], strict=True))
+            f"{n + 1}: {point(subgoal)} {'reached' if reached else 'missed'} ({point(end)})"
+            for n, (subgoal, end, reached) in enumerate(
+                zip(plan["subgoals"], plan["segment_ends"], plan["reached"], strict=True)
+            )
         )
         cells = [str(number), point(plan["start"]), steps or "-", point(plan["goal"]), point(plan["final"])]
         rows.append(

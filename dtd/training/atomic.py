@@ -5,26 +5,84 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
+
+from dtd.errors import MachineError, RunDirError
 
 
 def write_atomic(path: Path, write: Callable[[IO[bytes]], None]) -> None:
-    """Let ``write`` fill a temporary file, fsync it, rename it over ``path``, fsync the folder."""
-    path.parent.mkdir(parents=True, exist_ok=True)
+    """Let ``write`` fill a temporary file, fsync it, rename it over ``path``, fsync the folder.
+
+    A failure of the machine (a full disk, an I/O error) raises :class:`MachineError` naming
+    the operating system's reason and ``path``, even where the writer (``torch.save``) buries
+    that reason in an error of its own; ``path`` is then left as it was.
+    """
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    recorded = None
     try:
-        with open(tmp, "wb") as file:
-            write(file)
-            file.flush()
-            os.fsync(file.fileno())
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open_for_writing(tmp) as raw:
+            recorded = _RecordingWriter(raw)
+            write(recorded)  # type: ignore[arg-type]
+            raw.flush()
+            os.fsync(raw.fileno())
         os.replace(tmp, path)
+        fd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+    except OSError as exc:
+        raise MachineError(machine_failure(exc, path)) from exc
+    except Exception as exc:
+        if recorded is not None and recorded.error is not None:
+            raise MachineError(machine_failure(recorded.error, path)) from exc
+        raise
     finally:
         tmp.unlink(missing_ok=True)
-    fd = os.open(path.parent, os.O_RDONLY)
+
+
+def ensure_writable(folder: Path, what: str) -> None:
+    """Make ``folder`` if missing and check that a file can be written in it, or raise
+    :class:`RunDirError` saying that ``what`` cannot be written there and why: checked before
+    work whose result would be lost."""
+    probe = Path(folder) / f".write-check.{os.getpid()}.tmp"
     try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
+        Path(folder).mkdir(parents=True, exist_ok=True)
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise RunDirError(f"cannot write {what} into {folder}: {exc.strerror or exc}") from exc
+
+
+def open_for_writing(path: Path) -> IO[bytes]:
+    """The binary file every atomic write goes through (a seam for tests of a full disk)."""
+    return open(path, "wb")
+
+
+def machine_failure(error: OSError, path: Path) -> str:
+    """'no space left on device writing PATH': the operating system's reason, then the file."""
+    reason = (error.strerror or str(error)).rstrip(".")
+    return f"{reason[:1].lower()}{reason[1:]} writing {path}"
+
+
+class _RecordingWriter:
+    """A file that remembers the operating system's error of a failed write, which a writer in
+    C++ (``torch.save``) would otherwise replace with a message of its own."""
+
+    def __init__(self, file: IO[bytes]) -> None:
+        self.file = file
+        self.error: OSError | None = None
+
+    def write(self, data: Any) -> int:
+        try:
+            return self.file.write(data)
+        except OSError as exc:
+            self.error = exc
+            raise
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.file, name)
 
 
 def remove_stale_temporaries(folder: Path) -> list[Path]:

@@ -13,11 +13,12 @@ from dtd.envs.make import make_envs
 from dtd.envs.spec import EnvSpec
 from dtd.errors import CheckpointError, ConfigError, RunDirError
 from dtd.training.atomic import remove_stale_temporaries
-from dtd.training.checkpoint import FORMAT_VERSION, check_checkpoint, load_checkpoint
+from dtd.training.checkpoint import FORMAT_VERSION, check_checkpoint, load_checkpoint, restoring
 from dtd.training.components import Components, build, close_all, resolved_threads
 from dtd.training.progress import TrainingProgress
 from dtd.training.recorder import MetricsRecorder
 from dtd.training.run_dir import RunDir, read_config, write_config
+from dtd.training.run_lock import holding
 from dtd.training.trainer import Trainer, TrainState, restore
 
 # Settings that may change when a run is resumed; any other must stay as the run began.
@@ -66,47 +67,61 @@ def train(
 ) -> TrainState:
     """Start a run in ``run_dir`` (default: runs/<env>-<algo>-s<seed>) or, with ``resume``,
     continue the run in that directory after its last finished epoch; train it to
-    ``config.epochs`` and return its counters and metrics history."""
+    ``config.epochs`` and return its counters and metrics history.
+
+    The run directory is held by this process while it trains (a second trainer is refused,
+    :mod:`dtd.training.run_lock`); that it can be written is known before anything is built.
+    """
     if resume is not None:
         if run_dir is not None and Path(run_dir).resolve() != Path(resume).resolve():
             raise ConfigError("give the run directory once: --resume DIR (without --run-dir)")
-        run, config, components, state = _resumed(RunDir(Path(resume)), config)
+        run = RunDir(Path(resume))
+        read_config(run)  # a missing or unreadable run is refused before anything is written
     else:
-        run, config, components, state = _started(config, run_dir, force)
-    return _train_started(run, config, components, state, show_progress)
+        config.validate()
+        # The thread count is part of what makes a run repeatable: the run records it, and the
+        # batch its algorithm chose.
+        config = dataclasses.replace(config, threads=resolved_threads(config.threads, config.collector))
+        config = with_algorithm_batch(config)
+        run = RunDir(Path(run_dir) if run_dir is not None else default_run_dir(config))
+        if run.holds_run() and not force:
+            raise RunDirError(
+                f"{run.root} already holds a run; continue it with --resume {run.root} "
+                "or replace it with --force"
+            )
+    try:
+        with holding(run.root):
+            if resume is not None:
+                config, components, state = _resumed(run, config)
+                if components is None:
+                    return state  # trained to its end already: nothing is built or written
+            else:
+                components, state = build(config), TrainState()
+                if force:
+                    run.clear()
+            return _train_started(run, config, components, state, show_progress)
+    except KeyboardInterrupt as interrupt:
+        interrupt.run_dir = run.root  # type: ignore[attr-defined]  # how to continue, for the CLI
+        raise
 
 
-def _started(
-    config: TrainConfig, run_dir: Path | str | None, force: bool
-) -> tuple[RunDir, TrainConfig, Components, TrainState]:
-    """A new run's directory, resolved configuration and components."""
-    config.validate()
-    # The thread count is part of what makes a run repeatable: the run records it, and the
-    # batch its algorithm chose.
-    config = dataclasses.replace(config, threads=resolved_threads(config.threads, config.collector))
-    config = with_algorithm_batch(config)
-    run = RunDir(Path(run_dir) if run_dir is not None else default_run_dir(config))
-    if run.holds_run() and not force:
-        raise RunDirError(
-            f"{run.root} already holds a run; continue it with --resume {run.root} or replace it with --force"
-        )
-    components = build(config)
-    if force:
-        run.clear()
-    return run, config, components, TrainState()
-
-
-def _resumed(run: RunDir, given: TrainConfig) -> tuple[RunDir, TrainConfig, Components, TrainState]:
+def _resumed(run: RunDir, given: TrainConfig) -> tuple[TrainConfig, Components | None, TrainState]:
     """A stopped run's configuration (with the settings ``given`` may change), components and
-    counters, restored from its last checkpoint."""
+    counters, restored from its last checkpoint; no components when the run has already
+    trained ``config.epochs`` epochs."""
     config = resumed_config(read_config(run), given)
     config.validate()
     remove_stale_temporaries(run.root)  # half-written files of the process that was killed
     # A run killed during its first epoch has no checkpoint yet: it starts again.
     snapshot = load_checkpoint(run.latest) if run.latest.exists() else None
+    if snapshot is not None:
+        with restoring(run.latest):
+            trained = TrainState(**snapshot["state"])
+        if trained.epoch >= config.epochs:
+            return config, None, trained
     components = build(config)
     if snapshot is None:
-        return run, config, components, TrainState()
+        return config, components, TrainState()
     try:
         check_checkpoint(snapshot, config, components.spec, run.latest)
         if snapshot["format_version"] != FORMAT_VERSION:
@@ -120,7 +135,7 @@ def _resumed(run: RunDir, given: TrainConfig) -> tuple[RunDir, TrainConfig, Comp
     except CheckpointError:
         close_all(components)
         raise
-    return run, config, components, state
+    return config, components, state
 
 
 def _train_started(

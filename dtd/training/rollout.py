@@ -11,6 +11,7 @@ import numpy as np
 from dtd.agents.interface import Agent
 from dtd.agents.records import Episodes
 from dtd.envs.spec import EnvSpec
+from dtd.errors import EnvError
 
 StepHook = Callable[[int, np.ndarray], None]
 """Called with t and the (B, goal_dim) goals the policy pursues from the state at t: before
@@ -48,7 +49,12 @@ def run_episodes(
             on_step(t, step_goals[:, t])
         actions[:, t] = agent.act(obs[:, t], step_goals[:, t], explore, rng)
         for i, env in enumerate(envs):
-            step_obs, _, _, _, infos[i] = env.step(actions[i, t].reshape(env.action_space.shape))
+            step_obs, _, terminated, _, infos[i] = env.step(actions[i, t].reshape(env.action_space.shape))
+            if terminated and t + 1 < horizon:
+                raise EnvError(
+                    f"environment {spec.env_id!r} ended an episode at step {t + 1} of {horizon}; dtd "
+                    "learns from episodes that run to the time limit (as Gymnasium-Robotics' tasks do)"
+                )
             obs[i, t + 1] = step_obs["observation"].ravel()
             achieved[i, t + 1] = step_obs["achieved_goal"].ravel()
     if on_step is not None:

@@ -22,7 +22,8 @@ from dtd.errors import ConfigError, RunDirError
 from dtd.training.atomic import write_text_atomic
 
 CHECKPOINT_NAMES = ("latest", "best", "first")
-"""Checkpoints every run keeps: after the last epoch, of the best evaluation, after the first."""
+"""Checkpoints every run keeps: after the last epoch, of the best evaluation (the highest of
+noisy evaluations over a few test episodes each: it flatters the agent), after the first."""
 
 _VERSIONED = ("dtd", "torch", "numpy", "mujoco", "gymnasium", "gymnasium-robotics")
 
@@ -73,10 +74,16 @@ class RunDir:
             shutil.rmtree(path, ignore_errors=True)
 
     def checkpoint(self, name: str) -> Path:
-        """``latest``, ``best``, ``first``, or a path to a checkpoint file."""
+        """``latest``, ``best``, ``first``, or a path to a checkpoint file; a bare name that is
+        none of these is a :class:`RunDirError` listing what may be given."""
         if name in CHECKPOINT_NAMES:
             return self.checkpoints / f"{name}.pt"
-        return Path(name)
+        path = Path(name)
+        if not path.is_file() and len(path.parts) == 1 and not path.suffix:
+            raise RunDirError(
+                f"no checkpoint named {name!r}: give latest, best, first or the path of a checkpoint file"
+            )
+        return path
 
 
 def package_versions() -> dict[str, str]:

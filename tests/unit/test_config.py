@@ -1,6 +1,7 @@
 """Configuration: defaults, validation, round trips, presets and settings by name."""
 
 import dataclasses
+import re
 
 import pytest
 
@@ -94,3 +95,29 @@ def test_paper_preset_is_the_reference_and_options_override_it():
     assert paper.subgoal_sigma == 0.05 and TrainConfig().subgoal_sigma == 0.1
     assert TrainConfig.from_dict(paper.to_dict()) == paper
     assert preset_config(Preset.tuned) == TrainConfig()
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ({"epochs": "three"}, "epochs must be an integer, got 'three'"),
+        ({"epochs": 2.5}, "epochs must be an integer, got 2.5"),
+        ({"seed": True}, "seed must be an integer, got True"),
+        ({"noise_eps": "0.2"}, "noise_eps must be a number, got '0.2'"),
+        ({"env": 5}, "env must be a string, got 5"),
+        ({"learner": {"hidden_sizes": [64, "wide"]}}, "learner.hidden_sizes must be a list of integers"),
+        ({"high": {"clip_return": 1}}, "high.clip_return must be true or false, got 1"),
+        ({"learner": [1, 2]}, "learner must be a mapping of settings"),
+        ({"algo": "ppo"}, "unknown algo 'ppo'"),
+    ],
+)
+def test_a_stored_value_of_the_wrong_type_names_its_setting(data, message):
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        TrainConfig.from_dict(data)
+
+
+def test_stored_values_take_their_types():
+    config = TrainConfig.from_dict({"noise_eps": 1, "learner": {"hidden_sizes": [64, 64], "gamma": None}})
+    assert config.noise_eps == 1.0 and isinstance(config.noise_eps, float)
+    assert config.learner.hidden_sizes == (64, 64) and config.learner.gamma is None
+    assert config.learner.batch_size == 0 and config.high.batch_size == 256  # each level's defaults

@@ -9,7 +9,7 @@ from dtd.config import Algo, Preset, TrainConfig
 from dtd.errors import ConfigError, RunDirError
 from dtd.experiments.curves import Curve, band, quantile
 from dtd.experiments.plots import plot
-from dtd.experiments.run_curves import find_runs
+from dtd.experiments.run_curves import UnreadableRun, find_runs
 from dtd.experiments.summary import summaries
 from dtd.training.run_dir import RunDir, write_config
 
@@ -132,3 +132,26 @@ def test_a_trial_found_twice_counts_once(sweep_dir):
     write_run(sweep_dir / "more", "her", 3, [0.1])
     with pytest.warns(UserWarning):
         assert {row.label: row.runs for row in summaries(find_runs([sweep_dir]))}["her"] == 4
+
+
+@pytest.mark.parametrize(
+    ("damage", "reason"),
+    [
+        (lambda run: run.metrics.write_bytes(bytes(range(256)) * 8), "not a dtd metrics file"),
+        (
+            lambda run: run.metrics.write_text(run.metrics.read_text()[:-6]),
+            "line 5 has 4 fields where the header has 5",
+        ),
+        (lambda run: run.metrics.write_text("epoch,wall_s\n1,2\n"), "no env_steps, eval_success column"),
+        (lambda run: run.metrics.write_text(run.metrics.read_text().replace("0.6", "x")), "not a number"),
+        (lambda run: run.config.write_text("{not json"), "config.json is unreadable"),
+    ],
+)
+def test_an_unreadable_trial_is_left_out_with_a_warning_naming_it(sweep_dir, damage, reason):
+    damaged = RunDir(sweep_dir / "sweep" / "FetchPush-v4-her-s0")
+    damage(damaged)
+    with pytest.warns(UnreadableRun, match=f"skipped {damaged.root}: .*{reason}"):
+        result = plot([sweep_dir / "sweep"], sweep_dir / "out")
+    with open(result.summary_csv, newline="") as file:
+        rows = {row["algo"]: row for row in csv.DictReader(file)}
+    assert rows["her"]["runs"] == "2" and rows["dtd"]["runs"] == "1"  # the others are all drawn

@@ -1,0 +1,34 @@
+"""``dtd plot`` from the command line with a run it cannot read among those it can."""
+
+from __future__ import annotations
+
+import shutil
+
+import pytest
+
+from tests.helpers import dtd
+
+pytestmark = pytest.mark.smoke
+
+
+def test_plot_draws_the_readable_runs_and_names_the_others(tmp_path, reach_run):
+    shutil.copytree(reach_run, tmp_path / "runs" / "good")
+    broken = shutil.copytree(reach_run, tmp_path / "runs" / "broken")
+    (broken / "metrics.csv").write_bytes(b"\x00\xff\xfe binary \x00" * 50)
+    (tmp_path / "runs" / "other").mkdir()
+    shutil.copy(reach_run / "config.json", tmp_path / "runs" / "other" / "config.json")
+    (tmp_path / "runs" / "other" / "metrics.csv").write_text(
+        "epoch,env_steps,wall_s,eval_success\n1,200,1.0,0.5\n2,40"
+    )
+
+    result = dtd("plot", tmp_path / "runs", "--out", tmp_path / "figures")
+    assert result.returncode == 0, result.stderr
+    warnings = [line for line in result.stderr.splitlines() if line.startswith("warning: skipped")]
+    assert len(warnings) == 2, result.stderr
+    assert any(str(broken) in line and "not a dtd metrics file" in line for line in warnings)
+    assert any("line 3 has 2 fields" in line for line in warnings)
+    assert (tmp_path / "figures" / "FetchReach-v4.png").is_file()
+    assert "Traceback" not in result.stderr
+
+    strict = dtd("plot", tmp_path / "runs", "--out", tmp_path / "figures", "--strict")
+    assert strict.returncode == 1 and (tmp_path / "figures" / "summary.csv").is_file()
