@@ -9,7 +9,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from dtd.agents.networks import ActionHead, Actor, Critic
+from dtd.agents.networks import ActionHead, Actor, Critic, xavier_initialise
 from dtd.agents.normalizer import RunningNormalizer
 from dtd.agents.records import Batch
 from dtd.config import LearnerConfig
@@ -42,6 +42,9 @@ class DDPGLearner:
         self.head = head
         self.actor = Actor(input_dim, action_dim, config.hidden_sizes, config.layer_norm)
         self.critic = Critic(input_dim, action_dim, config.hidden_sizes, config.layer_norm)
+        if config.xavier_init:
+            xavier_initialise(self.actor)
+            xavier_initialise(self.critic)
         self.actor_target = _frozen_copy(self.actor)
         self.critic_target = _frozen_copy(self.critic)
         # The fused kernel does Adam's whole step in one pass (the default on CPU is a loop of
@@ -98,7 +101,9 @@ class DDPGLearner:
         self.goal_norm.update(np.clip(goal, -clip, clip))
 
     def update(self, batch: Batch) -> dict[str, float]:
-        """One gradient step of critic then actor; returns diagnostics."""
+        """One gradient step of critic and actor (the actor's against the critic after its step,
+        or with ``actor_after_critic`` off against the same critic as the critic's own, as
+        baselines' HER does); returns diagnostics."""
         obs = torch.as_tensor(batch.obs, dtype=torch.float32)
         next_obs = torch.as_tensor(batch.next_obs, dtype=torch.float32)
         inputs = self.inputs(obs, batch.goal)
@@ -121,8 +126,23 @@ class DDPGLearner:
         critic_loss = torch.mean(torch.square(q - target))
         self.critic_optim.zero_grad(set_to_none=True)
         critic_loss.backward()
-        self.critic_optim.step()
+        if self.config.actor_after_critic:
+            self.critic_optim.step()
+        actor_loss = self._actor_step(nets, inputs, obs)
+        if not self.config.actor_after_critic:  # both gradients came from the same parameters
+            self.critic_optim.step()
 
+        return {
+            "critic_loss": critic_loss.item(),
+            "actor_loss": actor_loss.item(),
+            "q_mean": q.detach().mean().item(),
+            "target_mean": target.mean().item(),
+        }
+
+    def _actor_step(
+        self, nets: dict[str, nn.Module], inputs: torch.Tensor, obs: torch.Tensor
+    ) -> torch.Tensor:
+        """One step of the actor up the critic's value, less its action penalty; the loss."""
         policy_action, unit = self._policy(nets["actor"], inputs, obs)
         action_penalty = torch.mean(torch.square(unit))
         actor_loss = (
@@ -134,13 +154,7 @@ class DDPGLearner:
         for param, grad in zip(self._actor_params, grads, strict=True):
             param.grad = grad
         self.actor_optim.step()
-
-        return {
-            "critic_loss": critic_loss.item(),
-            "actor_loss": actor_loss.item(),
-            "q_mean": q.detach().mean().item(),
-            "target_mean": target.mean().item(),
-        }
+        return actor_loss
 
     @torch.no_grad()
     def update_target(self) -> None:

@@ -26,6 +26,15 @@ def mlp(in_dim: int, hidden_sizes: Sequence[int], out_dim: int, layer_norm: bool
     return nn.Sequential(*layers)
 
 
+def xavier_initialise(module: nn.Module) -> None:
+    """Glorot-uniform weights and zero biases in every linear layer of ``module``, as OpenAI
+    baselines' HER initialises its networks (PyTorch's default is Kaiming-uniform)."""
+    for layer in module.modules():
+        if isinstance(layer, nn.Linear):
+            nn.init.xavier_uniform_(layer.weight)
+            nn.init.zeros_(layer.bias)
+
+
 class Actor(nn.Module):
     """mu(o || g) as a unit vector in [-1, 1]^d; a head maps it to an action."""
 

@@ -6,15 +6,15 @@ and a wrong option are answered without loading torch or MuJoCo.
 
 from __future__ import annotations
 
-import functools
 import sys
 
-import tyro
-
 from dtd.cli.explaining import evaluate, heatmap, render, report
+from dtd.cli.options import deferred, options_class, parse_command
 from dtd.cli.training import plot, sweep, train
 from dtd.config import Preset, preset_config
 from dtd.errors import DtdError, MachineError
+
+DESCRIPTION = "Dot-to-Dot: train and explain goal-conditioned agents (DDPG, HER, DtD)."
 
 
 def preset_named(argv: list[str]) -> Preset:
@@ -37,23 +37,19 @@ def main(argv: list[str] | None = None) -> None:
     # The preset supplies the defaults the other options override, so it is read first.
     preset = preset_config(preset_named(args))
     commands = {
-        "train": functools.partial(train, config=preset),
-        "sweep": functools.partial(sweep, config=preset),
-        "plot": plot,
-        "eval": evaluate,
-        "render": render,
-        "heatmap": heatmap,
-        "report": report,
+        "train": deferred(train, options_class(preset)),
+        "sweep": deferred(sweep, options_class(preset, omit=frozenset({"algo"}))),
+        "plot": deferred(plot),
+        "eval": deferred(evaluate),
+        "render": deferred(render),
+        "heatmap": deferred(heatmap),
+        "report": deferred(report),
     }
     try:
         if args[:1] == ["sweep"] and any(arg == "--algo" or arg.startswith("--algo=") for arg in args):
             raise DtdError("dtd sweep takes --algos (comma-separated), not --algo")
-        tyro.extras.subcommand_cli_from_dict(
-            commands,
-            prog="dtd",
-            description="Dot-to-Dot: train and explain goal-conditioned agents (DDPG, HER, DtD).",
-            args=args,
-        )
+        command = parse_command(commands, DESCRIPTION, args)
+        command()
     except DtdError as exc:
         print(f"dtd: error: {exc}", file=sys.stderr)
         sys.exit(2)

@@ -4,14 +4,19 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Annotated
 
 import tyro
 
+from dtd.cli.options import optional
 from dtd.errors import DtdError
+
+RunDirArgument = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN_DIR")]
+HEATMAP_HEIGHTS = "the table's; on FetchPickAndPlace also 0.1, 0.2, 0.3 m above"
 
 
 def evaluate(
-    run_dir: tyro.conf.Positional[Path],
+    run_dir: RunDirArgument,
     episodes: int = 100,
     checkpoint: str = "latest",
     seed: int = 1_000_003,
@@ -22,7 +27,8 @@ def evaluate(
     Args:
         run_dir: The run directory to evaluate.
         episodes: Number of evaluation episodes.
-        checkpoint: latest, best, first (after epoch 1), or a path to a checkpoint file of this run.
+        checkpoint: latest, best (the epoch of the highest eval success, a noisy pick that
+            flatters), first (after epoch 1), or the path of a checkpoint file of this run.
         seed: Seed of the evaluation episodes (apart from training's).
         show_subgoals: dtd runs: first print each episode's plan (start, sub-goals, reached, goal).
     """
@@ -35,9 +41,9 @@ def evaluate(
 
 
 def render(
-    run_dir: tyro.conf.Positional[Path],
+    run_dir: RunDirArgument,
     episodes: int = 3,
-    out: Path | None = None,
+    out: Annotated[Path | None, optional("DIR", "RUN_DIR/render")] = None,
     checkpoint: str = "latest",
     seed: int = 1_000_003,
     width: int = 480,
@@ -56,8 +62,9 @@ def render(
     Args:
         run_dir: The run directory.
         episodes: Episodes to render.
-        out: Where the files go (default: RUN_DIR/render).
-        checkpoint: latest, best, first (after epoch 1), or a path to a checkpoint file of this run.
+        out: Where the files go.
+        checkpoint: latest, best (the epoch of the highest eval success, a noisy pick that
+            flatters), first (after epoch 1), or the path of a checkpoint file of this run.
         seed: Seed of the episodes.
         width: Frame width in pixels.
         height: Frame height in pixels.
@@ -72,12 +79,14 @@ def render(
 
 
 def heatmap(
-    run_dir: tyro.conf.Positional[Path],
+    run_dir: RunDirArgument,
     start: str = "1.15,0.55",
     goal: str = "1.45,0.95",
-    out: Path | None = None,
+    out: Annotated[Path | None, optional("FILE", "RUN_DIR/heatmap.png")] = None,
     checkpoint: str = "first,latest",
-    heights: str | None = None,
+    heights: Annotated[
+        str | None, optional("Z,...", "the table's; on FetchPickAndPlace also 0.1, 0.2, 0.3 m above")
+    ] = None,
     resolution: int = 60,
 ) -> None:
     """Draw the high level's value of every sub-goal on a grid over the table (dtd runs on
@@ -91,9 +100,9 @@ def heatmap(
         run_dir: A dtd run directory.
         start: The block's x,y on the table (world frame, metres).
         goal: The goal's x,y (or x,y,z).
-        out: The image to write (PNG, or SVG by suffix; default: RUN_DIR/heatmap.png).
+        out: The image to write (PNG, or SVG by suffix).
         checkpoint: Comma-separated checkpoints, a panel each: first (after epoch 1), latest, best, paths.
-        heights: Comma-separated heights (z, m) of the slices (default: the table's; PickAndPlace: 4).
+        heights: Comma-separated heights (z, m) of the slices.
         resolution: Grid cells along each side of the table.
     """
     import numpy as np
@@ -118,7 +127,7 @@ def heatmap(
 
 
 def report(
-    run_dir: tyro.conf.Positional[Path],
+    run_dir: RunDirArgument,
     episodes: int = 3,
     checkpoint: str = "latest",
     seed: int = 1_000_003,

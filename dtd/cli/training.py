@@ -10,14 +10,15 @@ from typing import Annotated
 
 import tyro
 
+from dtd.cli.options import optional
 from dtd.config import TrainConfig
 from dtd.errors import DtdError
 
 
 def train(
     config: Annotated[TrainConfig, tyro.conf.arg(name="")],
-    run_dir: Path | None = None,
-    resume: Path | None = None,
+    run_dir: Annotated[Path | None, optional("DIR", "runs/<env>-<algo>-s<seed>")] = None,
+    resume: Annotated[Path | None, optional("DIR", "a new run")] = None,
     force: bool = False,
     progress: bool = True,
 ) -> None:
@@ -30,7 +31,7 @@ def train(
 
     Args:
         config: The run's settings.
-        run_dir: Where the run's files go (default: runs/<env>-<algo>-s<seed>).
+        run_dir: Where the run's files go.
         resume: Continue the run in this directory after its last finished epoch; --epochs may grow.
         force: Replace a run that already exists in --run-dir.
         progress: Show a live progress bar.
@@ -66,7 +67,7 @@ def sweep(
     algos: str = "ddpg,her,dtd",
     seeds: int = 5,
     workers: int = 0,
-    ray: str | None = None,
+    ray: Annotated[str | None, optional("ADDRESS", "local processes")] = None,
     progress: bool = True,
 ) -> None:
     """Train every (algorithm, seed) pair of one configuration, each into OUT/<env>-<algo>-s<seed>.
@@ -120,8 +121,8 @@ def sweep(
 
 def plot(
     run_dirs: tyro.conf.Positional[tuple[Path, ...]],
-    out: Path | None = None,
-    max_env_steps: int | None = None,
+    out: Annotated[Path | None, optional("DIR", "the first RUN_DIR")] = None,
+    max_env_steps: Annotated[int | None, optional("STEPS", "every epoch")] = None,
     strict: bool = False,
 ) -> None:
     """Draw success against epochs and env steps per environment, and write summary.csv.
@@ -138,8 +139,8 @@ def plot(
 
     Args:
         run_dirs: Sweep or run directories to read.
-        out: Where the figures (PNG and SVG per environment) and summary.csv go (default: the first RUN_DIR).
-        max_env_steps: Compare runs at this budget: each curve ends at its last epoch within it (None: all).
+        out: Where the figures (PNG and SVG per environment) and summary.csv go.
+        max_env_steps: Compare runs at this budget: each curve ends at its last epoch within it.
         strict: Exit with status 1 when a run was left out because its files cannot be read.
     """
     from dtd.experiments.plots import plot as draw_plots

@@ -50,6 +50,11 @@ PAPER_SETTINGS: dict[str, Any] = {
     "learner.norm_clip": 5.0,
     "learner.obs_clip": 200.0,
     "learner.norm_eps": 0.01,
+    "learner.xavier_init": True,
+    "learner.actor_after_critic": False,
+    "high.xavier_init": True,
+    "high.actor_after_critic": False,
+    "collect_ahead": False,
     "segments": 2,
     "subgoal_sigma": 0.05,
     # Dot-to-Dot as the paper describes it: near goals for the low level, both levels
@@ -57,7 +62,9 @@ PAPER_SETTINGS: dict[str, Any] = {
     "low_relabel_window": "segment",
     "high_updates_per_cycle": 40,
 }
-"""The reference settings (HER's, which the paper keeps) by their ``with_settings`` names."""
+"""The reference settings (OpenAI baselines' HER, which the paper keeps) by their
+``with_settings`` names: its hyperparameters, initialisation, update order and collection after
+the updates. One difference stays: one worker, where the reference averaged 19."""
 
 
 def preset_config(preset: Preset, **settings: Any) -> TrainConfig:

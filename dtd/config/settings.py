@@ -71,14 +71,14 @@ class LearnerConfig:
     critic_lr: float = 1e-3
     """Adam learning rate of the critic."""
     batch_size: int = 256
-    """Transitions per update; 0 (the low level's default): the algorithm's batch,
-    ``LOW_LEVEL_BATCH``."""
+    """Transitions per update; 0 (the default of her, ddpg and dtd's low level): the
+    algorithm's, 1024 for her and ddpg, 256 for dtd."""
     polyak: float = 0.95
     """Polyak coefficient of the target networks: target <- polyak * target + (1 - polyak) * online."""
     action_l2: float = 1.0
     """Weight of the actor's penalty on the squared (scaled) action."""
     gamma: float | None = None
-    """Discount; None: 1 - 1/T (T the horizon), and for dtd's high level gamma_low ** (T / segments)."""
+    """Discount per step; None: 1 - 1/T, T being the episode's length in steps."""
     clip_return: bool = True
     """Clip the critic's target to [-1/(1-gamma), 0], the range of returns of a -1/0 reward."""
     norm_clip: float = 5.0
@@ -87,6 +87,12 @@ class LearnerConfig:
     """Raw observations and goals are clipped to [-obs_clip, obs_clip] before normalising."""
     norm_eps: float = 0.01
     """Smallest standard deviation the running normalisers divide by."""
+    xavier_init: bool = False
+    """Initialise linear layers Glorot-uniform with zero biases, as OpenAI baselines' HER (off:
+    PyTorch's default)."""
+    actor_after_critic: bool = True
+    """Step the actor against the critic its own step just updated (off: both gradients from
+    the same parameters, as OpenAI baselines' HER)."""
 
 
 LOW_LEVEL_BATCH: dict[Algo, int] = {Algo.her: 1024, Algo.ddpg: 1024, Algo.dtd: 256}
@@ -142,23 +148,27 @@ class TrainConfig:
     """Exploration: std of Gaussian action noise, as a fraction of the largest action."""
     random_eps: float = 0.3
     """Exploration: probability of taking a uniformly random action instead."""
+    # One thread by default: two OpenMP threads beside any other busy process wait for each
+    # other and ran 2.5 to 4 times slower than one (benchmarks/contention.py, docs/results/speed.md).
     threads: int = 0
-    """Torch threads for the learner; 0: chosen for this machine (its usable cores, less one for
-    a collecting process, at most 4) and recorded in the run's config.json. Runs with the same
-    thread count are the same bit for bit."""
+    """Torch threads of the learner; 0: OMP_NUM_THREADS where it is set, else one. A run records
+    the number in its config.json; runs with the same number are the same bit for bit. More
+    than one is faster only on a machine nothing else is using."""
     collector: Collection = Collection.auto
-    """Where training episodes are collected (a matter of speed only: at the same thread count
-    the run is the same; with ``--threads 0`` a collecting process leaves the learner a core
-    fewer)."""
+    """Where training episodes are collected; a matter of speed only: at the same thread count
+    the run is the same."""
+    collect_ahead: bool = True
+    """Collect a cycle's episodes while the previous cycle's updates run, with the policy from
+    before them (off: after them, as OpenAI baselines' HER; slower with a collecting process)."""
     learner: tyro.conf.OmitArgPrefixes[LearnerConfig] = LOW_LEVEL_DEFAULTS
     """Settings of the DDPG learner (of the low level, for dtd)."""
     segments: int = 2
     """dtd: segments an episode is cut into; one sub-goal each, the last one being the goal."""
+    # With 0.1 FetchPush passed 0.9 success within 200k steps on three seeds of three (one of
+    # three with the reference's 0.05), and FetchPickAndPlace reached 0.5 at 215k, not 270k.
     subgoal_sigma: float = 0.1
     """dtd: std of the Gaussian perturbation of the achieved goal proposed as a sub-goal (the
-    reference: 0.05). With 0.1 FetchPush passed 0.9 success within 200k steps on three seeds
-    of three (one of three with 0.05), and on FetchPickAndPlace the high level learns sooner
-    to lift the block with its first sub-goal (0.5 success at about 215k steps, not 270k)."""
+    paper: 0.05)."""
     subgoal_eps_start: float = 1.0
     """dtd: probability of a perturbation sub-goal (instead of the high level's) at the start."""
     subgoal_eps_floor: float = 0.1
@@ -173,13 +183,13 @@ class TrainConfig:
     """dtd: HER at the high level: goals replaced by later achieved goals in k/(k+1) of samples."""
     hindsight_action_prob: float = 0.0
     """dtd: probability of replacing a sampled sub-goal by the goal reached at its segment's end."""
+    # On FetchPush the whole episode learned faster than the segment (0.95 against 0.86 at 300k).
     low_relabel_window: RelabelWindow = RelabelWindow.episode
-    """dtd: where the low level's relabelled goals come from (measured on FetchPush: the whole
-    episode learns faster than the segment)."""
+    """dtd: where the low level's relabelled goals come from."""
+    # It gets one transition per segment; with 10 FetchPush reached 0.97 success at 300k steps
+    # (one seed), at a quarter of the high level's cost with 40.
     high_updates_per_cycle: int = 10
-    """dtd: gradient updates of the high level per cycle, spread among the low level's. It gets
-    one transition per segment; with 10 FetchPush reached 0.97 success at 300k steps (one
-    seed), at a quarter of the high level's cost with 40."""
+    """dtd: gradient updates of the high level per cycle, spread among the low level's."""
     high: LearnerConfig = HIGH_LEVEL_DEFAULTS
     """dtd: settings of the high level's DDPG learner."""
 

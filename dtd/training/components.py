@@ -108,7 +108,8 @@ def build(
     config.validate()
     assert config.env is not None
     collection = collection or config.collector
-    torch.set_num_threads(resolved_threads(config.threads, collection))
+    threads = resolved_threads(config.threads)
+    torch.set_num_threads(threads)
     torch.manual_seed(config.seed)
     train_seq, eval_seq, rng_seq, explore_seq = np.random.SeedSequence(config.seed).spawn(4)
     if eval_seed is not None:
@@ -123,7 +124,7 @@ def build(
     agent = build_agent(config, spec, evaluation[0])
     exploring_side = functools.partial(_exploring_side, config, train_seq, explore_seq)
     try:
-        if resolved_collection(collection) is Collection.process:
+        if resolved_collection(collection, threads) is Collection.process:
             collector: Collector = ProcessCollector(exploring_side, agent)
         else:
             train, _, _, explore_rng = exploring_side(agent)
@@ -134,26 +135,29 @@ def build(
     return Components(spec, agent, collector, evaluation, np.random.default_rng(rng_seq))
 
 
-MAX_AUTO_THREADS = 4
-"""Most torch threads chosen automatically: updates of batch 256 gain little beyond."""
-
-
-def resolved_collection(collection: Collection) -> Collection:
-    """``auto`` made concrete: a collecting process when this process may use three cores or
-    more. On two cores a second torch thread for the learner gains more (FetchPush, her:
-    3.21 s per 1k env steps inline with 2 threads, 3.60 with a collecting process and 1)."""
+def resolved_collection(collection: Collection, threads: int) -> Collection:
+    """``auto`` made concrete for a learner of ``threads`` torch threads: a collecting process
+    where a core is left for it, else inline (a process beside threads on every core would
+    only take turns with them)."""
     if collection is not Collection.auto:
         return collection
-    return Collection.process if usable_cores() >= 3 else Collection.inline
+    return Collection.process if usable_cores() > threads else Collection.inline
 
 
-def resolved_threads(threads: int, collection: Collection) -> int:
-    """``threads``, or for 0 the usable cores less one for a collecting process, at most
-    :data:`MAX_AUTO_THREADS`."""
+def resolved_threads(threads: int) -> int:
+    """``threads``, or for 0 the OMP_NUM_THREADS the user set, else one. Two OpenMP threads
+    beside any other busy process wait for each other: an update took 2.5 to 4 times as long
+    as with one thread (benchmarks/contention.py); more threads are for a machine the run has
+    to itself, given by --threads."""
     if threads > 0:
         return threads
-    spare = 1 if resolved_collection(collection) is Collection.process else 0
-    return max(1, min(usable_cores() - spare, MAX_AUTO_THREADS))
+    return omp_num_threads() or 1
+
+
+def omp_num_threads() -> int | None:
+    """OMP_NUM_THREADS as a positive number of threads, where it is set to one."""
+    value = os.environ.get("OMP_NUM_THREADS", "").strip()
+    return int(value) if value.isdigit() and int(value) > 0 else None
 
 
 def usable_cores() -> int:

@@ -81,7 +81,7 @@ def train(
         config.validate()
         # The thread count is part of what makes a run repeatable: the run records it, and the
         # batch its algorithm chose.
-        config = dataclasses.replace(config, threads=resolved_threads(config.threads, config.collector))
+        config = dataclasses.replace(config, threads=resolved_threads(config.threads))
         config = with_algorithm_batch(config)
         run = RunDir(Path(run_dir) if run_dir is not None else default_run_dir(config))
         if run.holds_run() and not force:

@@ -87,11 +87,13 @@ class Trainer:
             episodes = self.collector.result()
             self.agent.store(episodes, self.rng)
             # The next cycle's episodes are collected while this cycle's updates run (in a
-            # collecting process, at the same time; inline, just before them).
-            if cycle < config.n_cycles:
+            # collecting process, at the same time; inline, just before them), or after them.
+            if cycle < config.n_cycles and config.collect_ahead:
                 self.collector.submit()
             for name, value in self.agent.train(config.updates_per_cycle, self.rng).items():
                 sums[name] = sums.get(name, 0.0) + value
+            if cycle < config.n_cycles and not config.collect_ahead:
+                self.collector.submit()
             collected.append(episodes)
             steps = episodes.count * self.spec.horizon
             state.env_steps += steps

@@ -154,3 +154,18 @@ def test_a_run_records_the_batch_its_algorithm_chose(tmp_path):
         result = dtd("train", "--resume", run_dir, "--epochs", "2", "--no-progress")
         assert result.returncode == 0, result.stderr
         assert json.loads((run_dir / "config.json").read_text())["config"]["learner"]["batch_size"] == batch
+
+
+def test_collecting_after_the_updates_is_the_same_inline_or_in_a_process(reach_run, tmp_path):
+    runs = {}
+    for collector in ("inline", "process"):
+        runs[collector] = tmp_path / collector
+        options = ["--no-collect-ahead", "--collector", collector, "--run-dir", runs[collector]]
+        result = dtd("train", "--env", "FetchReach-v4", "--epochs", "3", "--seed", "7", *TINY, *options)
+        assert result.returncode == 0, result.stderr
+    after = without_times(read_metrics(runs["inline"]))
+    assert after == without_times(read_metrics(runs["process"]))
+    # Collected with the policy after the cycle's updates: other episodes than collecting ahead.
+    assert after != without_times(read_metrics(reach_run))
+    config = json.loads((runs["inline"] / "config.json").read_text())["config"]
+    assert config["collect_ahead"] is False

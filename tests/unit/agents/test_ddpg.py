@@ -175,3 +175,32 @@ def test_exploration_noise_stays_in_bounds_and_takes_random_actions():
     assert np.all(np.abs(noisy) <= 2.0)
     far = np.abs(noisy - 1.9).max(axis=1) > 1.5  # only a random action lands that far
     assert 0.2 < far.mean() < 0.3
+
+
+def test_the_reference_update_order_steps_the_actor_against_the_critic_before_its_step():
+    rng = np.random.default_rng(3)
+    batch = random_batch(rng)
+    together = make_learner(dataclasses.replace(SMALL, actor_after_critic=False))
+    in_turn = make_learner(SMALL)
+    still_critic = make_learner(dataclasses.replace(SMALL, critic_lr=1e-30))
+    for learner in (together, in_turn, still_critic):
+        learner.update(batch)
+
+    def same(a: torch.nn.Module, b: torch.nn.Module) -> bool:
+        return all(torch.allclose(x, y) for x, y in zip(a.parameters(), b.parameters(), strict=True))
+
+    assert same(together.critic, in_turn.critic)  # the critic's step is the same either way
+    assert same(together.actor, still_critic.actor)  # the actor saw the critic before its step
+    assert not same(together.actor, in_turn.actor)
+
+
+def test_glorot_initialisation_has_zero_biases_and_its_bounds():
+    learner = make_learner(dataclasses.replace(SMALL, xavier_init=True))
+    for net in (learner.actor, learner.critic):
+        for layer in (m for m in net.modules() if isinstance(m, torch.nn.Linear)):
+            fan_out, fan_in = layer.weight.shape
+            bound = (6.0 / (fan_in + fan_out)) ** 0.5
+            assert torch.all(layer.bias == 0) and layer.weight.abs().max() <= bound
+            assert layer.weight.abs().max() > 0.8 * bound  # uniform up to the bound, not narrower
+    default = make_learner(SMALL)
+    assert any(torch.any(m.bias != 0) for m in default.actor.modules() if isinstance(m, torch.nn.Linear))

@@ -53,15 +53,24 @@ def test_resuming_keeps_the_runs_preset():
 
 
 @pytest.mark.parametrize(
-    ("cores", "collector", "expected"),
-    [(1, "auto", (1, "inline")), (2, "auto", (2, "inline")), (3, "auto", (2, "process")),
-     (16, "auto", (4, "process")), (2, "process", (1, "process")), (8, "inline", (4, "inline"))],
+    ("cores", "threads", "collector", "expected"),
+    [(1, 1, "auto", "inline"), (2, 1, "auto", "process"), (2, 2, "auto", "inline"),
+     (16, 4, "auto", "process"), (8, 1, "inline", "inline"), (1, 1, "process", "process")],
 )  # fmt: skip
-def test_automatic_threads_and_collector_fit_the_cores(monkeypatch, cores, collector, expected):
+def test_episodes_are_collected_beside_the_learner_where_a_core_is_free(
+    monkeypatch, cores, threads, collector, expected
+):
     monkeypatch.setattr(components, "usable_cores", lambda: cores)
-    collection = Collection(collector)
-    assert (
-        components.resolved_threads(0, collection),
-        components.resolved_collection(collection).value,
-    ) == expected
-    assert components.resolved_threads(3, collection) == 3  # given threads are kept
+    assert components.resolved_collection(Collection(collector), threads).value == expected
+
+
+def test_one_torch_thread_unless_asked_for_more(monkeypatch):
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    monkeypatch.setattr(components, "usable_cores", lambda: 16)
+    assert components.resolved_threads(0) == 1
+    assert components.resolved_threads(3) == 3  # given threads are kept
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    assert components.resolved_threads(0) == 2  # the user's OpenMP setting is kept
+    assert components.resolved_threads(3) == 3
+    monkeypatch.setenv("OMP_NUM_THREADS", "many")
+    assert components.resolved_threads(0) == 1
