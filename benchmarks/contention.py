@@ -37,31 +37,21 @@ SPIN = "while True: pass"
 def time_updates(threads: int, batch: int, updates: int, through_dtd: bool) -> dict[str, float]:
     """In this process: ms per update (median over blocks of 10) of a fresh learner."""
     if through_dtd:
-        import dtd  # noqa: F401  (what the library sets before torch loads)
+        import dtd  # noqa: F401  (imported before torch, as the command line does)
     import numpy as np
     import torch
 
     from dtd.agents.ddpg import DDPGLearner
     from dtd.agents.networks import BoxActionHead
-    from dtd.agents.records import Batch
     from dtd.config import LearnerConfig
     from dtd.training.components import resolved_threads
 
     torch.set_num_threads(resolved_threads(threads))
+    from updates import ACT, GOAL, OBS, random_batch  # benchmarks/updates.py: FetchPush's sizes
+
     rng = np.random.default_rng(0)
-    obs, goal, act = 25, 3, 4
-
-    def random_batch() -> Batch:
-        return Batch(
-            obs=rng.normal(size=(batch, obs)).astype(np.float32),
-            goal=rng.normal(size=(batch, goal)).astype(np.float32),
-            action=rng.uniform(-1, 1, size=(batch, act)).astype(np.float32),
-            reward=-rng.integers(0, 2, size=batch).astype(np.float32),
-            next_obs=rng.normal(size=(batch, obs)).astype(np.float32),
-        )
-
-    learner = DDPGLearner(obs, goal, act, BoxActionHead(1.0), LearnerConfig(batch_size=batch), gamma=0.98)
-    batches = [random_batch() for _ in range(20)]
+    learner = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), LearnerConfig(batch_size=batch), gamma=0.98)
+    batches = [random_batch(rng, batch) for _ in range(20)]
     for b in batches[:10]:
         learner.update(b)
     blocks = []

@@ -12,10 +12,12 @@ from pathlib import Path
 
 import pytest
 
-# A budget that exercises every part of training in about a second per epoch.
+# A budget that exercises every part of training in about a second per epoch (episodes collected
+# inline: a collecting process would take longer to start than such a run takes to train).
 TINY = [
     "--n-cycles", "2", "--updates-per-cycle", "5", "--batch-size", "32", "--hidden-sizes", "32", "32",
-    "--test-episodes", "2", "--buffer-size", "20000", "--threads", "1", "--no-progress",
+    "--test-episodes", "2", "--buffer-size", "20000", "--threads", "1", "--collector", "inline",
+    "--no-progress",
 ]  # fmt: skip
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import sys
 
 from dtd.cli.explaining import evaluate, heatmap, render, report
-from dtd.cli.options import deferred, options_class, parse_command
+from dtd.cli.options import REQUIRED_ENV_UNLESS_RESUMED, deferred, options_class, parse_command
 from dtd.cli.training import plot, sweep, train
 from dtd.config import Preset, preset_config
 from dtd.errors import DtdError, MachineError
@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> None:
     # The preset supplies the defaults the other options override, so it is read first.
     preset = preset_config(preset_named(args))
     commands = {
-        "train": deferred(train, options_class(preset)),
+        "train": deferred(train, options_class(preset, hints=REQUIRED_ENV_UNLESS_RESUMED)),
         "sweep": deferred(sweep, options_class(preset, omit=frozenset({"algo"}))),
         "plot": deferred(plot),
         "eval": deferred(evaluate),

@@ -50,7 +50,8 @@ HIGH_LEVEL_HINTS = {
 }
 """Metavar and hint of the learners' settings whose default (None) says nothing."""
 
-OPTION_HINTS = {"env": ("ID", "(required, unless --resume)")}
+REQUIRED_ENV = {"env": ("ID", "(required)")}
+REQUIRED_ENV_UNLESS_RESUMED = {"env": ("ID", "(required, unless --resume)")}
 """Metavar and hint (shown where the default would be) of options whose default says nothing."""
 
 
@@ -90,10 +91,15 @@ def reflowed(docstring: str) -> str:
     return "\n\n".join(out)
 
 
-def options_class(defaults: TrainConfig, omit: frozenset[str] = frozenset()) -> type:
+def options_class(
+    defaults: TrainConfig,
+    omit: frozenset[str] = frozenset(),
+    hints: dict[str, tuple[str, str]] = REQUIRED_ENV,
+) -> type:
     """A frozen dataclass of :class:`TrainConfig`'s fields but ``omit``, defaults from
-    ``defaults``, each with its help text; :func:`to_config` turns an instance back."""
-    hints = typing.get_type_hints(TrainConfig)
+    ``defaults``, each with its help text (and the metavar and hint ``hints`` give);
+    :func:`to_config` turns an instance back."""
+    types = typing.get_type_hints(TrainConfig)
     docs = field_help(TrainConfig)
     fields: list[tuple[str, Any, Any]] = []
     for field in dataclasses.fields(TrainConfig):
@@ -107,9 +113,9 @@ def options_class(defaults: TrainConfig, omit: frozenset[str] = frozenset()) -> 
                 annotation = tyro.conf.OmitArgPrefixes[annotation]
             value = level()
         else:
-            metavar, hint = OPTION_HINTS.get(field.name, (None, None))
+            metavar, hint = hints.get(field.name, (None, None))
             arg = tyro.conf.arg(help=docs[field.name], metavar=metavar, help_behavior_hint=hint)
-            annotation = Annotated[hints[field.name], arg]
+            annotation = Annotated[types[field.name], arg]
         fields.append((field.name, annotation, dataclasses.field(default=value)))
     return dataclasses.make_dataclass("TrainOptions", fields, frozen=True)
 

@@ -124,7 +124,7 @@ class TrainConfig:
     """Agent to train."""
     preset: Preset = Preset.tuned
     """Defaults of every other setting: ``tuned`` (docs/tuning.md) or ``paper`` (the reference
-    settings, exactly); the options given beside it override them."""
+    settings of HER and the paper); the options given beside it override them."""
     seed: int = 0
     """Seed of networks, environments, exploration and replay sampling."""
     epochs: int = 50
