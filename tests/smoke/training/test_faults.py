@@ -176,25 +176,34 @@ def test_an_unknown_checkpoint_name_lists_the_names(reach_run):
     one_error_line(dtd("eval", reach_run, "--checkpoint", "nosuch"), 2, "latest, best, first")
 
 
-def test_an_environment_that_ends_episodes_early_or_reports_no_success_is_refused(tmp_path):
+def train_on_test_env(env_id: str, run_dir: Path) -> subprocess.CompletedProcess[str]:
+    """`dtd train` on an environment of tests/goal_envs.py (importable from the repository)."""
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[3])}
-    common = ["--epochs", "1", *TINY]
-    ended = subprocess.run(
-        [sys.executable, "-m", "dtd", "train", "--env", "tests.goal_envs:PointGoalTerminating-v0", *common,
-         "--run-dir", str(tmp_path / "ended")],
-        capture_output=True, text=True, env=env, timeout=120,
-    )  # fmt: skip
-    one_error_line(ended, 2, "ended an episode at step 4 of 10")
-    silent = subprocess.run(
-        [sys.executable, "-m", "dtd", "train", "--env", "tests.goal_envs:PointGoalNoSuccess-v0", *common,
-         "--run-dir", str(tmp_path / "silent")],
-        capture_output=True, text=True, env=env, timeout=120,
-    )  # fmt: skip
-    one_error_line(silent, 2, "does not report info['is_success']")
+    command = [
+        sys.executable,
+        "-m",
+        "dtd",
+        "train",
+        "--env",
+        f"tests.goal_envs:{env_id}",
+        "--epochs",
+        "1",
+        *TINY,
+    ]
+    return subprocess.run([*command, "--run-dir", str(run_dir)], capture_output=True, text=True, env=env)
+
+
+def test_an_environment_that_ends_episodes_early_or_reports_no_success_is_refused(tmp_path):
+    one_error_line(
+        train_on_test_env("PointGoalTerminating-v0", tmp_path / "ended"),
+        2,
+        "ended an episode at step 4 of 10",
+    )
+    one_error_line(
+        train_on_test_env("PointGoalNoSuccess-v0", tmp_path / "silent"),
+        2,
+        "does not report info['is_success']",
+    )
     assert not (tmp_path / "silent").exists()
-    fine = subprocess.run(
-        [sys.executable, "-m", "dtd", "train", "--env", "tests.goal_envs:PointGoal-v0", *common,
-         "--run-dir", str(tmp_path / "fine")],
-        capture_output=True, text=True, env=env, timeout=120,
-    )  # fmt: skip
+    fine = train_on_test_env("PointGoal-v0", tmp_path / "fine")
     assert fine.returncode == 0, fine.stderr
