@@ -41,7 +41,15 @@ def start_training(run: Path, *extra: str) -> subprocess.Popen[str]:
     command = [sys.executable, "-m", "dtd", "train", "--env", "FetchReach-v4", "--epochs", "100000", *TINY]
     # Epoch lines go nowhere: a pipe nobody reads would fill and stop the trainer.
     command += ["--run-dir", str(run), *extra]
-    process = subprocess.Popen(command, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    process = subprocess.Popen(
+        command,
+        stderr=subprocess.PIPE,
+        stdout=subprocess.DEVNULL,
+        text=True,
+        # Ctrl-C as in a terminal: a shell that started these tests in the background may
+        # have left SIGINT ignored, and Python then never raises KeyboardInterrupt.
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     deadline = time.monotonic() + 600  # a guard against a hang, not a measure of speed
     while not (run / "metrics.csv").exists():  # past its set-up, into its epochs
         assert process.poll() is None, process.communicate()
