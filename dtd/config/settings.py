@@ -37,12 +37,11 @@ class RelabelWindow(enum.Enum):
 
 class Collection(enum.Enum):
     """Where training episodes are collected. At the same ``--threads`` the run is the same
-    either way, step for step: a cycle's episodes are collected while the learner makes the
-    previous cycle's updates, with the policy from before them; only the wall time differs."""
+    either way, step for step (with ``--collect-ahead`` or without); only the wall time
+    differs."""
 
     auto = "auto"
-    """``process`` where at least three cores are free for the run, else ``inline`` (on two
-    cores the learner gains more from a second torch thread than from a collecting process)."""
+    """``process`` where a core is left beside the learner's torch threads, else ``inline``."""
     inline = "inline"
     """In the learner's process, between its updates."""
     process = "process"
