@@ -17,7 +17,12 @@ from dtd.agents.her import sample_transitions
 from dtd.agents.interface import mean_metrics
 from dtd.agents.networks import SubgoalHead
 from dtd.agents.records import Batch, Episodes
-from dtd.agents.segments import episode_plan, high_level_input, sample_segment_transitions
+from dtd.agents.segments import (
+    episode_plan,
+    high_level_input,
+    sample_segment_transitions,
+    subgoal_placement,
+)
 from dtd.envs.spec import RewardFn
 
 
@@ -210,21 +215,66 @@ class DotToDotAgent:
         return metrics
 
     def episode_metrics(self, episodes: Episodes) -> dict[str, float]:
-        """How the sub-goals of these episodes went: reached at their segment's end, and how
-        far they lay from the start and from the goal (intermediate sub-goals only)."""
+        """How the sub-goals of these episodes went: reached at their segment's end, how far
+        they lay from the start and from the goal, and where along the way (progress along
+        the start-to-goal line and distance off it, over episodes whose goal is not met at
+        their start; NaN where every goal is). Intermediate sub-goals only."""
         starts, ends = self.bounds[:-2], self.bounds[1:-1]
         subgoals = episodes.step_goal[:, starts]  # (B, N-1, G)
         reached_goals = episodes.achieved_goal[:, ends]
         goal_dim = subgoals.shape[-1]
         rewards = self.reward_fn(reached_goals.reshape(-1, goal_dim), subgoals.reshape(-1, goal_dim))
         start = episodes.achieved_goal[:, :1]
+        progress, off_line = self._placement(episodes)
         return {
             "subgoal_reached": float(np.mean(rewards == 0.0)),
             "subgoal_from_start": float(np.mean(np.linalg.norm(subgoals - start, axis=-1))),
             "subgoal_from_goal": float(
                 np.mean(np.linalg.norm(subgoals - episodes.desired_goal[:, None], axis=-1))
             ),
+            "subgoal_progress": float(np.mean(progress)) if progress.size else float("nan"),
+            "subgoal_off_line": float(np.mean(off_line)) if off_line.size else float("nan"),
         }
+
+    def placement_by_distance(self, episodes: Episodes, groups: int = 3) -> list[dict[str, Any]]:
+        """Where the intermediate sub-goals lay along the way, for ``groups`` groups of
+        episodes of equal size by the distance from the start to the goal (nearest first;
+        episodes whose goal is met at their start left out): per group its distance range,
+        episodes, success, and per sub-goal the mean progress along the start-to-goal line
+        (0 start, 1 goal) and mean distance off it."""
+        start, goal = episodes.achieved_goal[:, 0], episodes.desired_goal
+        away = self._goal_away(episodes)
+        distance = np.linalg.norm(goal - start, axis=-1)[away]
+        progress, off_line = self._placement(episodes)
+        order = np.argsort(distance, kind="stable")
+        summary: list[dict[str, Any]] = []
+        if not len(order):
+            return summary
+        for members in np.array_split(order, min(groups, len(order))):
+            summary.append(
+                {
+                    "goal_distance": [round(float(distance[members][i]), 4) for i in (0, -1)],
+                    "episodes": len(members),
+                    "success": float(np.mean(episodes.success[away][members])),
+                    "progress": [round(float(v), 3) for v in np.mean(progress[members], axis=0)],
+                    "off_line": [round(float(v), 4) for v in np.mean(off_line[members], axis=0)],
+                }
+            )
+        return summary
+
+    def _goal_away(self, episodes: Episodes) -> np.ndarray:
+        """(B,) whether an episode's goal is not already met at its start."""
+        return self.reward_fn(episodes.achieved_goal[:, 0], episodes.desired_goal) != 0.0
+
+    def _placement(self, episodes: Episodes) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`subgoal_placement` of the intermediate sub-goals, over the episodes whose
+        goal is not met at their start: (B', N-1) each."""
+        away = self._goal_away(episodes)
+        return subgoal_placement(
+            episodes.achieved_goal[away, 0],
+            episodes.step_goal[away][:, self.bounds[:-2]],
+            episodes.desired_goal[away],
+        )
 
     def plan(self, episodes: Episodes) -> list[dict[str, Any]]:
         """Per episode: the start, each segment's sub-goal, where the segment ended and whether

@@ -110,6 +110,28 @@ def sample_segment_transitions(
     )
 
 
+def subgoal_placement(
+    start: np.ndarray, subgoals: np.ndarray, goal: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where sub-goals lie along the way from the start to the goal.
+
+    ``start`` and ``goal`` (B, G), ``subgoals`` (B, K, G). Returns ``progress`` (B, K), the
+    projection of each sub-goal onto the start-to-goal line as a fraction of that line (0 at
+    the start, 1 at the goal, below 0 behind the start), and ``off_line`` (B, K), its distance
+    from that line. Both are NaN for an episode whose goal is its start.
+    """
+    line = goal - start  # (B, G)
+    length_sq = np.sum(line * line, axis=-1)  # (B,)
+    offset = subgoals - start[:, None]  # (B, K, G)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        progress = np.einsum("bkg,bg->bk", offset, line) / length_sq[:, None]
+    off_line = np.linalg.norm(offset - progress[..., None] * line[:, None], axis=-1)
+    undefined = length_sq <= 0.0
+    progress[undefined] = np.nan
+    off_line[undefined] = np.nan
+    return progress, off_line
+
+
 def episode_plan(
     episodes: Episodes, index: int, bounds: np.ndarray | None, reward_fn: RewardFn | None = None
 ) -> dict[str, Any]:

@@ -30,13 +30,16 @@ def evaluate(
         checkpoint: latest, best (the epoch of the highest eval success, a noisy pick that
             flatters), first (after epoch 1), or the path of a checkpoint file of this run.
         seed: Seed of the evaluation episodes (apart from training's).
-        show_subgoals: dtd runs: first print each episode's plan (start, sub-goals, reached, goal).
+        show_subgoals: dtd runs: first print each episode's plan (start, sub-goals, reached, goal)
+            and where the sub-goals lay along the way, by how far the goal was.
     """
     from dtd.training.trained_run import evaluate_run
 
     result = evaluate_run(run_dir, episodes, checkpoint, seed, show_subgoals)
     for number, plan in enumerate(result.pop("plans", []), start=1):
         print(format_plan(number, plan))
+    if show_subgoals:
+        print(format_placement(result["subgoal_placement"]))
     print(json.dumps(result))
 
 
@@ -177,4 +180,21 @@ def format_plan(number: int, plan: dict) -> str:
             f"  segment {segment}: sub-goal {point(subgoal)}  reached: {verdict}, ended at {point(end)}"
         )
     lines.append(f"  goal     {point(plan['goal'])}")
+    return "\n".join(lines)
+
+
+def format_placement(groups: list[dict]) -> str:
+    """Where the sub-goals lay along the way, per group of goal distances, as a table."""
+    lines = [
+        "sub-goals along the way (progress: 0 at the start, 1 at the goal; off line: distance from it)",
+        "  goal distance    episodes  success  progress per sub-goal  off line per sub-goal",
+    ]
+    for group in groups:
+        low, high = group["goal_distance"]
+        progress = " ".join(f"{value:.2f}" for value in group["progress"])
+        off_line = " ".join(f"{value:.3f}" for value in group["off_line"])
+        counts = f"{group['episodes']:>8}  {group['success']:>7.2f}"
+        lines.append(f"  {low:.3f} - {high:.3f}  {counts}  {progress:<21}  {off_line}")
+    if not groups:
+        lines.append("  (every goal was met at its episode's start)")
     return "\n".join(lines)

@@ -68,8 +68,10 @@ def evaluate_run(
     seed: int = EVAL_SEED,
     show_subgoals: bool = False,
 ) -> dict[str, Any]:
-    """Deterministic episodes of a trained agent; the figures as a dict (with ``plans``, the
-    high level's sub-goals per episode, when ``show_subgoals``)."""
+    """Deterministic episodes of a trained agent; the figures as a dict. For a dtd run also
+    ``subgoal_placement``, where the sub-goals lay along the way by the goal's distance (see
+    :meth:`DotToDotAgent.placement_by_distance`), and with ``show_subgoals`` ``plans``, the
+    high level's sub-goals per episode."""
     if episodes < 1:
         raise ConfigError(f"--episodes must be at least 1, got {episodes}")
     config = read_config(RunDir(Path(run_dir)))
@@ -102,7 +104,8 @@ def evaluate_run(
         "mean_final_distance": figures.pop("final_distance"),
         **figures,
     }
-    if show_subgoals:
-        assert isinstance(components.agent, DotToDotAgent)
-        result["plans"] = components.agent.plan(played)
+    if isinstance(components.agent, DotToDotAgent):
+        result["subgoal_placement"] = components.agent.placement_by_distance(played)
+        if show_subgoals:
+            result["plans"] = components.agent.plan(played)
     return result

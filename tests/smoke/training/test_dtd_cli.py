@@ -27,7 +27,9 @@ def test_dtd_logs_both_levels_and_its_sub_goals(push_dtd):
     assert len(rows) == 3
     columns = ["eval_success", "eval_subgoal_reached", "train_subgoal_reached", "subgoal_eps",
                "high_critic_loss", "high_actor_loss", "high_q_mean", "eval_subgoal_from_start",
-               "eval_subgoal_from_goal", "train_subgoal_from_start", "train_subgoal_from_goal"]  # fmt: skip
+               "eval_subgoal_from_goal", "train_subgoal_from_start", "train_subgoal_from_goal",
+               "eval_subgoal_progress", "eval_subgoal_off_line", "train_subgoal_progress",
+               "train_subgoal_off_line"]  # fmt: skip
     for column in columns:
         assert all(row[column] != "" for row in rows), column
     # The hand-over starts at 1 and decays: 2 cycles x 2 episodes per epoch over 30 epochs.
@@ -42,7 +44,11 @@ def test_eval_shows_the_plan_of_each_episode(push_dtd):
     figures = json.loads(lines[-1])
     assert figures["algo"] == "dtd" and figures["episodes"] == 2
     assert 0.0 <= figures["subgoal_reached"] <= 1.0
+    placement = figures["subgoal_placement"]
+    assert sum(group["episodes"] for group in placement) <= 2
+    assert all(len(group["progress"]) == len(group["off_line"]) == 1 for group in placement)
     text = "\n".join(lines[:-1])
+    assert "sub-goals along the way" in text
     assert text.count("episode ") == 2 and text.count("segment 0: sub-goal") == 2
     assert text.count("segment 1: sub-goal") == 2 and text.count("goal     (") == 2
     # The last sub-goal is the goal itself.

@@ -19,6 +19,7 @@ from dtd.agents.segments import (
     segment_mean_reward,
     segment_of_step,
     segment_window_end,
+    subgoal_placement,
 )
 from dtd.config import LearnerConfig
 from dtd.envs.make import make_envs
@@ -179,13 +180,13 @@ def test_goal_box_stops_at_the_height_where_the_object_rests():
     assert spec.goal_low[2] < first["achieved_goal"][2] - 0.1
 
 
-def make_agent(seed: int = 0, eps: float = 1.0, high_updates: int = 4) -> DotToDotAgent:
+def make_agent(seed: int = 0, eps: float = 1.0, high_updates: int = 4, segments: int = 2) -> DotToDotAgent:
     torch.manual_seed(seed)
     config = LearnerConfig(hidden_sizes=(16,), batch_size=8)
     low = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), config, 0.9)
     head = SubgoalHead(0.3, (-1.0,) * GOAL, (60.0,) * GOAL, None)
     high = DDPGLearner(OBS + GOAL, GOAL, GOAL, head, config, 0.5)
-    bounds = segment_bounds(T, 2)
+    bounds = segment_bounds(T, segments)
     return DotToDotAgent(
         low=low,
         high=high,
@@ -251,6 +252,10 @@ def test_training_reports_both_levels_and_checkpoints_round_trip(tmp_path):
     figures = agent.episode_metrics(labelled_episodes())
     assert figures["subgoal_reached"] == 0.0  # sub-goals (e, t, 2) are never reached
     assert figures["subgoal_from_start"] == pytest.approx(2.0)  # (e, 0, 2) vs (e, 0, 0)
+    # From (e, 0, 0) toward the goal (e, -1, 1) the sub-goal (e, 0, 2) is as far along the line
+    # as the goal, and (0, 1, 1) off it.
+    assert figures["subgoal_progress"] == pytest.approx(1.0)
+    assert figures["subgoal_off_line"] == pytest.approx(np.sqrt(2.0))
     save_atomic(tmp_path / "a.pt", agent.state_dict())
     restored = make_agent(seed=9)
     restored.load_state_dict(load_checkpoint(tmp_path / "a.pt"))
@@ -275,3 +280,35 @@ def test_the_high_level_makes_its_own_number_of_updates_spread_among_the_low_lev
     highs_before = [calls[:index].count("high") for index, name in enumerate(calls) if name == "low"]
     assert all(h <= -(-i * high_updates // updates) for i, h in enumerate(highs_before))
     assert calls[-1] == "high"
+
+
+def test_subgoal_placement_is_progress_along_the_start_to_goal_line_and_distance_off_it():
+    start = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    goal = np.array([[2.0, 0.0, 0.0], [1.0, 1.0, 1.0]])  # the second episode's goal is its start
+    subgoals = np.array(
+        [
+            [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [4.0, 0.0, 3.0]],
+            [[0.0, 0.0, 0.0]] * 4,
+        ]
+    )
+    progress, off_line = subgoal_placement(start, subgoals, goal)
+    assert progress[0].tolist() == [0.5, 0.5, -0.5, 2.0]
+    assert off_line[0].tolist() == [0.0, 1.0, 0.0, 3.0]
+    assert np.all(np.isnan(progress[1])) and np.all(np.isnan(off_line[1]))
+
+
+def test_placement_by_distance_groups_episodes_by_how_far_their_goal_is():
+    agent = make_agent(segments=3)
+    episodes = labelled_episodes(count=4)
+    goal = episodes.desired_goal.copy()
+    goal[:, 1] = [-1.0, -4.0, -2.0, 0.0]  # distances from (e, 0, 0): sqrt 2, sqrt 17, sqrt 5, 1
+    goal[3] = episodes.achieved_goal[3, 0]  # met at the start: left out
+    episodes = episodes._replace(desired_goal=goal, success=np.array([1.0, 0.0, 1.0, 1.0], np.float32))
+    groups = agent.placement_by_distance(episodes, groups=2)
+    assert [group["episodes"] for group in groups] == [2, 1]
+    assert groups[0]["goal_distance"] == pytest.approx([np.sqrt(2.0), np.sqrt(5.0)], abs=1e-4)
+    assert groups[0]["success"] == 1.0 and groups[1]["success"] == 0.0
+    assert len(groups[0]["progress"]) == 2  # two intermediate sub-goals of three segments
+    # Sub-goal (e, t, 2) against the line from (e, 0, 0) to (e, -4, 1): (-4t + 2) / 17 along it.
+    assert groups[1]["progress"] == pytest.approx([2 / 17, (-4 * 3 + 2) / 17], abs=1e-3)
+    assert agent.placement_by_distance(episodes._replace(desired_goal=episodes.achieved_goal[:, 0])) == []
