@@ -2,7 +2,8 @@
 
 A point on a plane moves by a tenth of its action per step toward a goal; success is being
 within 0.1 of it. Variants: one whose episodes end early (terminated), one that does not
-report ``info["is_success"]``.
+report ``info["is_success"]``, and one whose goal lies farther than half an episode can travel,
+so that a two-segment agent succeeds only when its first sub-goal leads toward the goal.
 """
 
 from __future__ import annotations
@@ -16,7 +17,12 @@ import numpy as np
 class PointGoalEnv(gym.Env):
     """A point moved toward a goal; goal-conditioned as Gymnasium-Robotics' tasks are."""
 
-    def __init__(self, terminate_at: int | None = None, report_success: bool = True) -> None:
+    def __init__(
+        self,
+        terminate_at: int | None = None,
+        report_success: bool = True,
+        goal_distance: tuple[float, float] | None = None,
+    ) -> None:
         box = gym.spaces.Box(-5.0, 5.0, (2,), dtype=np.float64)
         self.observation_space = gym.spaces.Dict(
             {"observation": box, "achieved_goal": box, "desired_goal": box}
@@ -24,6 +30,7 @@ class PointGoalEnv(gym.Env):
         self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
         self.terminate_at = terminate_at
         self.report_success = report_success
+        self.goal_distance = goal_distance
         self.position = np.zeros(2)
         self.goal = np.zeros(2)
         self.steps = 0
@@ -35,12 +42,19 @@ class PointGoalEnv(gym.Env):
     def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
         super().reset(seed=seed)
         self.position = self.np_random.uniform(-0.5, 0.5, 2)
-        self.goal = self.np_random.uniform(-0.5, 0.5, 2)
+        if self.goal_distance is None:
+            self.goal = self.np_random.uniform(-0.5, 0.5, 2)
+        else:
+            angle = self.np_random.uniform(0.0, 2.0 * np.pi)
+            distance = self.np_random.uniform(*self.goal_distance)
+            self.goal = self.position + distance * np.array([np.cos(angle), np.sin(angle)])
         self.steps = 0
         return self._observation(), {}
 
     def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
-        self.position = self.position + 0.1 * np.clip(action, -1.0, 1.0)
+        # At most 0.1 per step in any direction.
+        action = np.asarray(action, dtype=np.float64)
+        self.position = self.position + 0.1 * action / max(1.0, float(np.linalg.norm(action)))
         self.steps += 1
         reward = float(self.compute_reward(self.position, self.goal, None))
         terminated = self.terminate_at is not None and self.steps >= self.terminate_at
@@ -61,4 +75,7 @@ gym.register(
 )
 gym.register(
     "PointGoalNoSuccess-v0", entry_point=PointGoalEnv, max_episode_steps=10, kwargs={"report_success": False}
+)
+gym.register(
+    "PointGoalFar-v0", entry_point=PointGoalEnv, max_episode_steps=10, kwargs={"goal_distance": (0.7, 0.9)}
 )

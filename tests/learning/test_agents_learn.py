@@ -1,12 +1,17 @@
-"""Learning: HER and DtD must solve FetchReach on a small, fixed budget and seed."""
+"""Learning: HER and DtD must solve FetchReach on a small, fixed budget and seed, and DtD's high
+level must learn to lead toward a goal that the last segment cannot reach alone."""
 
 from __future__ import annotations
 
+import dataclasses
+
+import numpy as np
 import pytest
 
-from dtd.config import Algo, TrainConfig
+from dtd.agents.segments import subgoal_placement
+from dtd.config import Algo, LearnerConfig, TrainConfig
 from dtd.training.lifecycle import train
-from dtd.training.trained_run import evaluate_run
+from dtd.training.trained_run import evaluate_run, load_agent
 
 pytestmark = pytest.mark.learning
 
@@ -25,3 +30,46 @@ def test_dtd_reaches_90_percent_on_fetch_reach(tmp_path):
     figures = evaluate_run(tmp_path / "run", episodes=50, checkpoint="latest", seed=123)
     assert figures["success_rate"] >= 0.9, figures
     assert figures["subgoal_reached"] >= 0.5, figures
+
+
+def test_dtd_high_level_leads_toward_a_goal_beyond_one_segments_reach(tmp_path):
+    # PointGoalFar-v0: the goal lies 0.7-0.9 away and a segment of 5 steps travels at most 0.5,
+    # so an episode succeeds only if the first sub-goal leads toward the goal; a high level that
+    # learned nothing (or the wrong thing: with its reward negated, success 0.25 and progress
+    # -0.02) fails here, while FetchReach above is solved by the last segment alone.
+    learner = LearnerConfig(hidden_sizes=(64, 64), batch_size=128, action_l2=0.05)
+    config = TrainConfig(
+        env="tests.goal_envs:PointGoalFar-v0",
+        algo=Algo.dtd,
+        seed=0,
+        epochs=20,
+        n_cycles=10,
+        episodes_per_cycle=4,
+        updates_per_cycle=40,
+        test_episodes=20,
+        threads=1,
+        collector="inline",
+        subgoal_max_distance=0.5,
+        subgoal_eps_decay_epochs=8,
+        learner=learner,
+        high=dataclasses.replace(learner, batch_size=64),
+    )
+    train(config, run_dir=tmp_path / "run", show_progress=False)
+    figures = evaluate_run(tmp_path / "run", episodes=100, checkpoint="latest", seed=123)
+    assert figures["success_rate"] >= 0.8, figures
+    # The first sub-goal lies well along the way to the goal, at every distance.
+    assert figures["subgoal_progress"] >= 0.4, figures
+    assert all(group["progress"][0] >= 0.3 for group in figures["subgoal_placement"]), figures
+    # The high level's critic values sub-goals toward the goal highest: over a grid of
+    # sub-goals around the start, its best lies along the way (negated reward: -0.03).
+    agent, env = load_agent(tmp_path / "run")
+    offsets = np.stack(np.meshgrid(np.linspace(-0.5, 0.5, 21), np.linspace(-0.5, 0.5, 21)), -1).reshape(-1, 2)
+    best_progress = []
+    for episode in range(50):
+        observation, _ = env.reset(seed=1_000 + episode)
+        start, goal = observation["achieved_goal"], observation["desired_goal"]
+        best = start + offsets[np.argmax(agent.subgoal_values(observation, goal, start + offsets))]
+        progress, _ = subgoal_placement(start[None], best[None, None], goal[None])
+        best_progress.append(progress[0, 0])
+    env.close()
+    assert np.median(best_progress) >= 0.3, best_progress
