@@ -120,6 +120,9 @@ class DDPGLearner:
                     given, torch.as_tensor(batch.next_action, dtype=torch.float32), next_action
                 )
             next_q = self._q(nets["critic_target"], next_inputs, next_action)
+            if batch.next_value is not None and batch.next_value_given is not None:
+                known = torch.as_tensor(batch.next_value_given)
+                next_q = torch.where(known, torch.as_tensor(batch.next_value, dtype=torch.float32), next_q)
             # Episodes end only by the time limit, so every transition bootstraps.
             target = torch.clamp(reward + self.gamma * next_q, *self.return_bounds)
         q = self._q(nets["critic"], inputs, action)
@@ -128,7 +131,7 @@ class DDPGLearner:
         critic_loss.backward()
         if self.config.actor_after_critic:
             self.critic_optim.step()
-        actor_loss = self._actor_step(nets, inputs, obs)
+        actor_loss = self._actor_step(nets, inputs, obs, batch.actor_rows)
         if not self.config.actor_after_critic:  # both gradients came from the same parameters
             self.critic_optim.step()
 
@@ -140,9 +143,19 @@ class DDPGLearner:
         }
 
     def _actor_step(
-        self, nets: dict[str, nn.Module], inputs: torch.Tensor, obs: torch.Tensor
+        self,
+        nets: dict[str, nn.Module],
+        inputs: torch.Tensor,
+        obs: torch.Tensor,
+        rows: np.ndarray | None = None,
     ) -> torch.Tensor:
-        """One step of the actor up the critic's value, less its action penalty; the loss."""
+        """One step of the actor up the critic's value, less its action penalty, on ``rows``
+        of the batch (all without them); the loss (no step, and loss 0, without any row)."""
+        if rows is not None:
+            chosen = torch.as_tensor(rows)
+            if not bool(chosen.any()):
+                return torch.zeros(())
+            inputs, obs = inputs[chosen], obs[chosen]
         policy_action, unit = self._policy(nets["actor"], inputs, obs)
         action_penalty = torch.mean(torch.square(unit))
         actor_loss = (

@@ -78,6 +78,8 @@ class DotToDotAgent:
         hindsight_action_prob: float,
         high_updates: int,
         low_past_share: float = 0.0,
+        high_observed_gamma: float | None = None,
+        high_actor_all_segments: bool = True,
     ) -> None:
         if not isinstance(high.head, SubgoalHead):
             raise TypeError("the high level's learner must propose sub-goals (a SubgoalHead)")
@@ -96,6 +98,11 @@ class DotToDotAgent:
         self.hindsight_action_prob = hindsight_action_prob
         self.high_updates = high_updates
         """High-level updates per call of :meth:`train`."""
+        self.high_observed_gamma = high_observed_gamma
+        """Where given, the segment before the last learns the value of its end from what the
+        episode did next (see :func:`sample_segment_transitions`), discounted by it."""
+        self.high_actor_all_segments = high_actor_all_segments
+        """Whether the high level's actor learns also where the last segment starts."""
         self._subgoal: np.ndarray | None = None
 
     @property
@@ -179,7 +186,7 @@ class DotToDotAgent:
         )
 
     def _high_batch(self, episodes: Episodes, size: int, rng: np.random.Generator) -> Batch:
-        return sample_segment_transitions(
+        batch = sample_segment_transitions(
             episodes,
             self.bounds,
             size,
@@ -187,7 +194,9 @@ class DotToDotAgent:
             self.high_relabel_prob,
             self.hindsight_action_prob,
             self.reward_fn,
+            self.high_observed_gamma,
         )
+        return batch._replace(actor_rows=None) if self.high_actor_all_segments else batch
 
     def store(self, episodes: Episodes, rng: np.random.Generator) -> None:
         self.buffer.add(episodes)

@@ -46,3 +46,10 @@ class Batch(NamedTuple):
     """Where given (rows of ``next_action_given``), the action that follows ``next_obs`` is
     known and is used for bootstrapping instead of the target actor's."""
     next_action_given: np.ndarray | None = None
+    next_value: np.ndarray | None = None
+    """Where given (rows of ``next_value_given``), the value of ``next_obs`` is known from what
+    followed it and replaces the target critic's estimate in the target."""
+    next_value_given: np.ndarray | None = None
+    actor_rows: np.ndarray | None = None
+    """Where given, the rows the actor learns from (states where the policy chooses); all rows
+    without it."""

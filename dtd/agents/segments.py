@@ -73,6 +73,7 @@ def sample_segment_transitions(
     relabel_prob: float,
     hindsight_action_prob: float,
     reward_fn: RewardFn,
+    observed_gamma: float | None = None,
 ) -> Batch:
     """High-level transitions, one per (episode, segment), with HER on the task's goal.
 
@@ -81,7 +82,11 @@ def sample_segment_transitions(
     replaced by a goal achieved later in the episode and the reward recomputed from the
     stored achieved goals. With ``hindsight_action_prob``, a non-final segment's sub-goal is
     replaced by the goal it actually reached. When the next segment is the last, its
-    sub-goal is the goal itself, so that is the next action to bootstrap from.
+    sub-goal is the goal itself, so that is the next action to bootstrap from; or, with
+    ``observed_gamma`` (the high level's discount), the segment before the last takes the
+    value of its end from what the episode went on to do against g instead: the last
+    segment's mean reward, then the final achieved goal's reward held for ever. The actor
+    learns only from the segments where it chooses (``actor_rows``: all but the last).
     """
     count = episodes.obs.shape[0]
     segments = len(bounds) - 1
@@ -99,6 +104,18 @@ def sample_segment_transitions(
 
     subgoal = episodes.step_goal[episode, start].copy()
     subgoal[hindsight] = episodes.achieved_goal[episode[hindsight], stop[hindsight]]
+    next_value, next_value_given = None, None
+    if observed_gamma is not None:
+        next_value_given = segment == segments - 2
+        next_value = np.zeros(batch_size, dtype=np.float32)
+        rows = np.flatnonzero(next_value_given)
+        if len(rows):
+            last, end = np.full(len(rows), bounds[-2]), np.full(len(rows), horizon)
+            last_segment = segment_mean_reward(
+                episodes.achieved_goal, episode[rows], last, end, goal[rows], reward_fn
+            )
+            final = reward_fn(episodes.achieved_goal[episode[rows], horizon], goal[rows])
+            next_value[rows] = last_segment + observed_gamma * final / (1.0 - observed_gamma)
     return Batch(
         obs=high_level_obs(episodes, episode, start),
         goal=goal,
@@ -107,6 +124,9 @@ def sample_segment_transitions(
         next_obs=high_level_obs(episodes, episode, stop),
         next_action=goal,
         next_action_given=segment + 1 >= segments - 1,
+        next_value=next_value,
+        next_value_given=next_value_given,
+        actor_rows=segment < segments - 1,
     )
 
 

@@ -30,8 +30,7 @@ def evaluate(
         checkpoint: latest, best (the epoch of the highest eval success, a noisy pick that
             flatters), first (after epoch 1), or the path of a checkpoint file of this run.
         seed: Seed of the evaluation episodes (apart from training's).
-        show_subgoals: dtd runs: first print each episode's plan (start, sub-goals, reached, goal)
-            and where the sub-goals lay along the way, by how far the goal was.
+        show_subgoals: dtd runs: first print each episode's plan, then where the sub-goals lay.
     """
     from dtd.training.trained_run import evaluate_run
 

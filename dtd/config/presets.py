@@ -61,6 +61,8 @@ PAPER_SETTINGS: dict[str, Any] = {
     # updated alike in each training phase.
     "low_relabel_window": "segment",
     "high_updates_per_cycle": 40,
+    "high_target": "bootstrap",
+    "high_actor_last_segment": True,
 }
 """The reference settings (OpenAI baselines' HER, which the paper keeps) by their
 ``with_settings`` names: its hyperparameters, initialisation, update order and collection after

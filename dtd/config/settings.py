@@ -35,6 +35,18 @@ class RelabelWindow(enum.Enum):
     """From anywhere later in the episode, as in plain HER."""
 
 
+class HighTarget(enum.Enum):
+    """What the high level of Dot-to-Dot learns the value of the segment before the last from."""
+
+    bootstrap = "bootstrap"
+    """Its reward plus the target critic where the last segment starts, with the goal as that
+    segment's sub-goal: Q1'(o', g, g), as the paper."""
+    observed = "observed"
+    """Its reward plus what the episode went on to earn against the goal: the last segment's
+    mean reward, then the final achieved goal's reward held for ever; no critic, so a
+    relabelled goal needs no value of Q1 where the sub-goal is the goal."""
+
+
 class Collection(enum.Enum):
     """Where training episodes are collected. At the same ``--threads`` the run is the same
     either way, step for step (with ``--collect-ahead`` or without); only the wall time
@@ -189,6 +201,15 @@ class TrainConfig:
     # (one seed), at a quarter of the high level's cost with 40.
     high_updates_per_cycle: int = 10
     """dtd: gradient updates of the high level per cycle, spread among the low level's."""
+    high_target: HighTarget = HighTarget.bootstrap
+    """dtd: where the value of the segment before the last comes from: ``bootstrap``, the
+    target critic where the last segment starts with the goal as its sub-goal (the paper);
+    ``observed``, what the episode went on to earn against the goal (the last segment's mean
+    reward, then the final reward held for ever)."""
+    high_actor_last_segment: bool = True
+    """dtd: the high level's actor learns also from the states where the last segment starts,
+    where the goal is the sub-goal and the actor never chooses (off: only from the states
+    where it chooses)."""
     high: LearnerConfig = HIGH_LEVEL_DEFAULTS
     """dtd: settings of the high level's DDPG learner."""
 

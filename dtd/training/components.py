@@ -20,7 +20,7 @@ from dtd.agents.her import GoalStrategy, relabel_probability
 from dtd.agents.interface import Agent
 from dtd.agents.networks import BoxActionHead, SubgoalHead
 from dtd.agents.segments import segment_bounds, segment_window_end
-from dtd.config import Algo, Collection, RelabelWindow, TrainConfig, with_algorithm_batch
+from dtd.config import Algo, Collection, HighTarget, RelabelWindow, TrainConfig, with_algorithm_batch
 from dtd.envs.make import make_envs
 from dtd.envs.spec import EnvSpec, reward_function
 from dtd.errors import ConfigError
@@ -65,6 +65,8 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env) -> Agent:
     high_gamma = (
         config.high.gamma if config.high.gamma is not None else gamma ** (spec.horizon / config.segments)
     )
+    if config.high_target is HighTarget.observed and not high_gamma < 1.0:
+        raise ConfigError(f"--high-target observed needs a high-level discount below 1, got {high_gamma}")
     head = SubgoalHead(config.subgoal_max_distance, spec.goal_low, spec.goal_high, spec.quaternion)
     high = DDPGLearner(
         spec.obs_dim + spec.goal_dim, spec.goal_dim, spec.goal_dim, head, config.high, high_gamma
@@ -90,6 +92,8 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env) -> Agent:
         high_relabel_prob=relabel_probability(GoalStrategy.future, config.high_replay_k),
         hindsight_action_prob=config.hindsight_action_prob,
         high_updates=config.high_updates_per_cycle,
+        high_observed_gamma=high_gamma if config.high_target is HighTarget.observed else None,
+        high_actor_all_segments=config.high_actor_last_segment,
     )
 
 

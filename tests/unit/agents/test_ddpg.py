@@ -204,3 +204,39 @@ def test_glorot_initialisation_has_zero_biases_and_its_bounds():
             assert layer.weight.abs().max() > 0.8 * bound  # uniform up to the bound, not narrower
     default = make_learner(SMALL)
     assert any(torch.any(m.bias != 0) for m in default.actor.modules() if isinstance(m, torch.nn.Linear))
+
+
+def test_known_next_values_replace_the_target_critics_estimate():
+    learner = make_learner()
+    rng = np.random.default_rng(4)
+    batch = random_batch(rng)
+    known = np.arange(16) % 2 == 0
+    batch = batch._replace(next_value=np.full(16, -3.0, np.float32), next_value_given=known)
+    with torch.no_grad():  # a target critic that says 0 everywhere
+        for param in learner.critic_target.parameters():
+            param.zero_()
+    metrics = learner.update(batch)
+    expected = np.where(known, batch.reward + 0.9 * -3.0, batch.reward)
+    assert metrics["target_mean"] == pytest.approx(float(expected.mean()), rel=1e-6)
+
+
+def test_the_actor_learns_only_from_its_rows():
+    rng = np.random.default_rng(5)
+    batch = random_batch(rng)
+    rows = np.arange(16) < 5
+    masked = make_learner()
+    masked.update(batch._replace(actor_rows=rows))
+    without_rows = make_learner()
+    without_rows.update(batch._replace(actor_rows=np.zeros(16, bool)))  # a critic step only
+    for unchanged, start in zip(
+        without_rows.actor.parameters(), make_learner().actor.parameters(), strict=True
+    ):
+        assert torch.equal(unchanged, start)
+    # The actor's step equals one taken on those 5 rows alone, against the same critic.
+    subset = make_learner()
+    subset.critic.load_state_dict(masked.critic.state_dict())
+    inputs = subset.inputs(torch.as_tensor(batch.obs[rows]), batch.goal[rows])
+    loss = subset._actor_step(subset._train_nets, inputs, torch.as_tensor(batch.obs[rows]))
+    for ours, theirs in zip(masked.actor.parameters(), subset.actor.parameters(), strict=True):
+        assert torch.allclose(ours, theirs, atol=1e-6)
+    assert torch.isfinite(loss)

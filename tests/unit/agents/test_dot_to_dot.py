@@ -312,3 +312,35 @@ def test_placement_by_distance_groups_episodes_by_how_far_their_goal_is():
     # Sub-goal (e, t, 2) against the line from (e, 0, 0) to (e, -4, 1): (-4t + 2) / 17 along it.
     assert groups[1]["progress"] == pytest.approx([2 / 17, (-4 * 3 + 2) / 17], abs=1e-3)
     assert agent.placement_by_distance(episodes._replace(desired_goal=episodes.achieved_goal[:, 0])) == []
+
+
+def test_observed_values_end_the_segment_before_the_last_with_what_the_episode_did_next():
+    bounds = segment_bounds(T, 3)  # [0, 3, 7, 10]
+    gamma = 0.5
+    batch = sample_segment_transitions(
+        labelled_episodes(), bounds, 2000, np.random.default_rng(5), 1.0, 0.0, reached_reward, gamma
+    )
+    start = batch.obs[:, 1] / 10
+    before_last = start == 3
+    assert np.array_equal(batch.next_value_given, before_last)
+    # Relabelled goal (e, f, 0): in the last segment (steps 7-9, reaching t = 8..10) one step
+    # earns 0 when 8 <= f <= 10; the final achieved goal (t = 10) meets it only when f = 10.
+    f = batch.goal[before_last, 1]
+    last_segment = np.where(f >= 8, -2 / 3, -1.0)
+    final = np.where(f == 10, 0.0, -1.0)
+    assert np.allclose(batch.next_value[before_last], last_segment + gamma * final / (1 - gamma))
+    # The actor learns where it chooses: every segment but the last.
+    assert np.array_equal(batch.actor_rows, start < 7)
+    bootstrapped = sample_segment_transitions(
+        labelled_episodes(), bounds, 50, np.random.default_rng(5), 1.0, 0.0, reached_reward
+    )
+    assert bootstrapped.next_value is None and bootstrapped.next_value_given is None
+
+
+def test_the_agent_passes_its_high_level_choices_to_the_batch():
+    agent = make_agent()
+    batch = agent._high_batch(labelled_episodes(), 64, np.random.default_rng(6))
+    assert batch.actor_rows is None and batch.next_value is None
+    agent.high_actor_all_segments, agent.high_observed_gamma = False, 0.5
+    batch = agent._high_batch(labelled_episodes(), 64, np.random.default_rng(6))
+    assert batch.actor_rows is not None and batch.next_value_given is not None
