@@ -124,7 +124,8 @@ class DDPGLearner:
                 known = torch.as_tensor(batch.next_value_given)
                 next_q = torch.where(known, torch.as_tensor(batch.next_value, dtype=torch.float32), next_q)
             # Episodes end only by the time limit, so every transition bootstraps.
-            target = torch.clamp(reward + self.gamma * next_q, *self.return_bounds)
+            discount = self.gamma if batch.discount is None else torch.as_tensor(batch.discount)
+            target = torch.clamp(reward + discount * next_q, *self.return_bounds)
         q = self._q(nets["critic"], inputs, action)
         critic_loss = torch.mean(torch.square(q - target))
         self.critic_optim.zero_grad(set_to_none=True)

@@ -80,6 +80,7 @@ class DotToDotAgent:
         low_past_share: float = 0.0,
         high_observed_gamma: float | None = None,
         high_actor_all_segments: bool = True,
+        low_n_step: int = 1,
     ) -> None:
         if not isinstance(high.head, SubgoalHead):
             raise TypeError("the high level's learner must propose sub-goals (a SubgoalHead)")
@@ -94,6 +95,7 @@ class DotToDotAgent:
         self.low_relabel_prob = low_relabel_prob
         self.low_window_end = low_window_end
         self.low_past_share = low_past_share
+        self.low_n_step = low_n_step
         self.high_relabel_prob = high_relabel_prob
         self.hindsight_action_prob = hindsight_action_prob
         self.high_updates = high_updates
@@ -183,6 +185,8 @@ class DotToDotAgent:
             self.reward_fn,
             self.low_window_end,
             self.low_past_share,
+            self.low_n_step,
+            self.low.gamma,
         )
 
     def _high_batch(self, episodes: Episodes, size: int, rng: np.random.Generator) -> Batch:

@@ -27,6 +27,7 @@ class GoalConditionedAgent:
         strategy: GoalStrategy,
         replay_k: int,
         past_share: float = 0.0,
+        n_step: int = 1,
     ) -> None:
         self.learner = learner
         self.buffer = buffer
@@ -34,6 +35,8 @@ class GoalConditionedAgent:
         self.noise = noise
         self.relabel_prob = relabel_probability(strategy, replay_k)
         self.past_share = past_share
+        self.n_step = n_step
+        """Rewards summed per sampled transition before its value is bootstrapped."""
 
     def step_goal(
         self,
@@ -65,7 +68,14 @@ class GoalConditionedAgent:
 
     def _batch(self, episodes: Episodes, size: int, rng: np.random.Generator) -> Batch:
         return sample_transitions(
-            episodes, size, rng, self.relabel_prob, self.reward_fn, past_share=self.past_share
+            episodes,
+            size,
+            rng,
+            self.relabel_prob,
+            self.reward_fn,
+            past_share=self.past_share,
+            n_step=self.n_step,
+            gamma=self.learner.gamma,
         )
 
     def episode_metrics(self, episodes: Episodes) -> dict[str, float]:

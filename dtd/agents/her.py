@@ -44,6 +44,8 @@ def sample_transitions(
     reward_fn: RewardFn,
     window_end: np.ndarray | None = None,
     past_share: float = 0.0,
+    n_step: int = 1,
+    gamma: float = 1.0,
 ) -> Batch:
     """Sample transitions uniformly over stored steps, relabel goals, recompute rewards.
 
@@ -51,6 +53,11 @@ def sample_transitions(
     (default: the episode's end). A share ``past_share`` of the relabelled transitions takes
     instead the goal of a random stored step, of any episode: a goal given before, a likely
     goal of the task (mrl's ``actual`` goals).
+
+    With ``n_step`` > 1 the reward is the ``gamma``-discounted sum of the rewards of steps
+    t .. t+n-1 against the (relabelled) goal, cut at the episode's end, and the transition
+    leads to the observation after them, with ``discount`` gamma to the power of the steps
+    summed.
     """
     count, horizon = episodes.action.shape[:2]
     episode = rng.integers(0, count, size=batch_size)
@@ -68,11 +75,29 @@ def sample_transitions(
         past_t = rng.integers(0, horizon, size=batch_size)[past]
         goal[past] = episodes.step_goal[past_episode, past_t]
     # The reward of step t is earned by the goal it reached: the next achieved goal.
-    reward = reward_fn(episodes.achieved_goal[episode, t + 1], goal)
+    if n_step == 1:
+        return Batch(
+            obs=episodes.obs[episode, t],
+            goal=goal,
+            action=episodes.action[episode, t],
+            reward=reward_fn(episodes.achieved_goal[episode, t + 1], goal),
+            next_obs=episodes.obs[episode, t + 1],
+        )
+    steps = np.minimum(n_step, horizon - t)  # (B,) rewards summed
+    offsets = np.arange(n_step)[None, :]
+    inside = offsets < steps[:, None]
+    reached = np.minimum(t[:, None] + 1 + offsets, horizon)
+    goal_dim = goal.shape[-1]
+    rewards = reward_fn(
+        episodes.achieved_goal[episode[:, None], reached].reshape(-1, goal_dim),
+        np.repeat(goal, n_step, axis=0),
+    ).reshape(batch_size, n_step)
+    discounts = gamma ** offsets.astype(np.float64)
     return Batch(
         obs=episodes.obs[episode, t],
         goal=goal,
         action=episodes.action[episode, t],
-        reward=reward,
-        next_obs=episodes.obs[episode, t + 1],
+        reward=np.sum(rewards * discounts * inside, axis=1).astype(np.float32),
+        next_obs=episodes.obs[episode, t + steps],
+        discount=(gamma ** steps.astype(np.float64)).astype(np.float32),
     )

@@ -50,6 +50,9 @@ class Batch(NamedTuple):
     """Where given (rows of ``next_value_given``), the value of ``next_obs`` is known from what
     followed it and replaces the target critic's estimate in the target."""
     next_value_given: np.ndarray | None = None
+    discount: np.ndarray | None = None
+    """Where given, each row's discount of the value of ``next_obs`` (for n-step returns),
+    instead of the learner's gamma."""
     actor_rows: np.ndarray | None = None
     """Where given, the rows the actor learns from (states where the policy chooses); all rows
     without it."""

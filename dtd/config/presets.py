@@ -36,6 +36,7 @@ PAPER_SETTINGS: dict[str, Any] = {
     "buffer_size": 1_000_000,
     "replay_k": 4,
     "past_goal_share": 0.0,
+    "n_step": 1,
     "noise_eps": 0.2,
     "random_eps": 0.3,
     "learner.hidden_sizes": [256, 256, 256],

@@ -155,6 +155,9 @@ class TrainConfig:
     past_goal_share: float = 0.0
     """HER: share of the relabelled goals that are goals given before (of a random stored
     step, any episode) instead of goals achieved later in the episode."""
+    n_step: int = 1
+    """Rewards summed per sampled transition before bootstrapping (n-step returns; dtd: the
+    low level's), cut at the episode's end; 1 is one-step DDPG."""
     noise_eps: float = 0.2
     """Exploration: std of Gaussian action noise, as a fraction of the largest action."""
     random_eps: float = 0.3

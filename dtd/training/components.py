@@ -55,7 +55,7 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env) -> Agent:
     if config.algo is not Algo.dtd:
         strategy = GoalStrategy.future if config.algo is Algo.her else GoalStrategy.none
         return GoalConditionedAgent(
-            low, buffer, reward_fn, noise, strategy, config.replay_k, config.past_goal_share
+            low, buffer, reward_fn, noise, strategy, config.replay_k, config.past_goal_share, config.n_step
         )
 
     if config.segments > spec.horizon:
@@ -94,6 +94,7 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env) -> Agent:
         high_updates=config.high_updates_per_cycle,
         high_observed_gamma=high_gamma if config.high_target is HighTarget.observed else None,
         high_actor_all_segments=config.high_actor_last_segment,
+        low_n_step=config.n_step,
     )
 
 

@@ -240,3 +240,15 @@ def test_the_actor_learns_only_from_its_rows():
     for ours, theirs in zip(masked.actor.parameters(), subset.actor.parameters(), strict=True):
         assert torch.allclose(ours, theirs, atol=1e-6)
     assert torch.isfinite(loss)
+
+
+def test_a_per_row_discount_replaces_gamma():
+    learner = make_learner()
+    batch = random_batch(np.random.default_rng(6))
+    with torch.no_grad():  # a target critic that says -1 everywhere
+        for param in learner.critic_target.parameters():
+            param.zero_()
+        learner.critic_target.body[-1].bias.fill_(-1.0)
+    discount = np.linspace(0.0, 0.8, 16).astype(np.float32)
+    metrics = learner.update(batch._replace(discount=discount))
+    assert metrics["target_mean"] == pytest.approx(float(np.mean(batch.reward - discount)), rel=1e-6)

@@ -123,3 +123,24 @@ def test_without_a_past_share_the_samples_are_those_of_plain_her():
 @pytest.mark.parametrize(("k", "p"), [(4, 0.8), (1, 0.5), (0, 0.0)])
 def test_future_probability(k, p):
     assert relabel_probability(GoalStrategy.future, k) == pytest.approx(p)
+
+
+def test_n_step_transitions_sum_discounted_rewards_up_to_the_episode_end():
+    gamma, n = 0.5, 3
+    batch = sample_transitions(
+        labelled_episodes(), 4000, np.random.default_rng(7), 1.0, exact_reward, n_step=n, gamma=gamma
+    )
+    t = batch.obs[:, 1] / 10
+    f = batch.goal[:, 1]  # relabelled goal (e, f, 0): only the step reaching t + 1 = f earns 0
+    steps = np.minimum(n, T - t)
+    reached_at = f - t - 1  # offset of the step that reaches the goal
+    hit = (reached_at >= 0) & (reached_at < steps)
+    expected = -np.sum([gamma**i * (i < steps) for i in range(n)], axis=0) + np.where(
+        hit, gamma**reached_at, 0
+    )
+    assert np.allclose(batch.reward, expected)
+    assert np.array_equal(batch.next_obs[:, 1] / 10, t + steps)
+    assert np.allclose(batch.discount, gamma**steps)
+    assert set(np.unique(steps)) == {1, 2, 3}  # cut at the episode's end
+    one_step = sample_transitions(labelled_episodes(), 50, np.random.default_rng(7), 1.0, exact_reward)
+    assert one_step.discount is None
