@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dtd.agents.buffer import slots_oldest_first
 from dtd.errors import CheckpointError
 from dtd.training.checkpoint import load_checkpoint
 from dtd.training.run_dir import RunDir
@@ -42,9 +43,8 @@ def episode_motion(run: Path) -> tuple[int, np.ndarray, np.ndarray]:
     size, added = int(buffer["size"]), int(buffer["episodes_added"])
     achieved = buffer["data"]["achieved_goal"].numpy()[:size]
     gripper = buffer["data"]["obs"].numpy()[:size, :, 0:3]
-    if added > size:  # a full ring: the oldest episode is the next to be overwritten
-        order = np.roll(np.arange(size), -int(buffer["next_index"]))
-        achieved, gripper = achieved[order], gripper[order]
+    order = slots_oldest_first(size, added, int(buffer["next_index"]))
+    achieved, gripper = achieved[order], gripper[order]
     displacement = np.linalg.norm(achieved - achieved[:, :1], axis=-1).max(axis=1)
     approach = np.linalg.norm(gripper - achieved, axis=-1).min(axis=1)
     return added - size, displacement, approach

@@ -41,7 +41,7 @@ def figures(run_dir: Path, episodes: int, samples: int) -> dict[str, dict[str, f
         raise SystemExit(f"{run_dir}: needs a dtd run with two segments or more")
     agent.buffer.load_state_dict(loaded.snapshot["agent"]["buffer"])
     stored = agent.buffer.stored()
-    newest = np.argsort(_collection_order(agent.buffer.state_dict()))[-episodes:]
+    newest = agent.buffer.oldest_first()[-episodes:]
     recent = type(stored)(*(part[newest] for part in stored))
     high, gamma = agent.high, agent.high.gamma
     rng = np.random.default_rng(0)
@@ -68,15 +68,6 @@ def figures(run_dir: Path, episodes: int, samples: int) -> dict[str, dict[str, f
             "|Q1 - observed|": float(np.mean(np.abs(q - observed))),
         }
     return result
-
-
-def _collection_order(buffer_state: dict) -> np.ndarray:
-    """Per stored episode, its place in collection order (higher is newer)."""
-    size, added = int(buffer_state["size"]), int(buffer_state["episodes_added"])
-    slots = np.arange(size)
-    if added <= size:
-        return slots
-    return (slots - int(buffer_state["next_index"])) % size
 
 
 def main() -> None:

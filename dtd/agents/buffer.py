@@ -53,6 +53,10 @@ class EpisodeBuffer:
         """Views of the stored episodes (in slot order, not age order)."""
         return Episodes(*(array[: self.size] for array in self._data))
 
+    def oldest_first(self) -> np.ndarray:
+        """Indices into :meth:`stored` in the order the episodes were added."""
+        return slots_oldest_first(self.size, self.episodes_added, self.next_index)
+
     def state_dict(self) -> dict[str, Any]:
         """Plain data: the stored episodes and the ring's position."""
         return {
@@ -76,3 +80,10 @@ class EpisodeBuffer:
         self.size = size
         self.next_index = int(state["next_index"])
         self.episodes_added = int(state["episodes_added"])
+
+
+def slots_oldest_first(size: int, episodes_added: int, next_index: int) -> np.ndarray:
+    """The slots of a ring of ``size`` stored episodes in the order they were added: in slot
+    order until it wraps, then from ``next_index`` (the next to be overwritten, the oldest)."""
+    slots = np.arange(size)
+    return slots if episodes_added <= size else np.roll(slots, -next_index)

@@ -53,3 +53,21 @@ def test_state_round_trip():
     for a, b in zip(buffer.stored(), restored.stored(), strict=True):
         assert np.array_equal(a, b)
     assert (restored.size, restored.next_index, restored.episodes_added) == (4, 2, 6)
+
+
+def test_oldest_first_orders_a_wrapped_ring_by_age():
+    buffer = EpisodeBuffer(4, 2, 1, 1, 1)
+    assert buffer.oldest_first().tolist() == []
+    for number in range(6):  # episodes 0..5 into 4 slots: 4, 5 overwrite 0, 1
+        buffer.add(
+            Episodes(
+                obs=np.full((1, 3, 1), number, np.float32),
+                achieved_goal=np.zeros((1, 3, 1), np.float32),
+                action=np.zeros((1, 2, 1), np.float32),
+                step_goal=np.zeros((1, 2, 1), np.float32),
+                desired_goal=np.zeros((1, 1), np.float32),
+                success=np.zeros(1, np.float32),
+            )
+        )
+        added = buffer.stored().obs[buffer.oldest_first(), 0, 0].tolist()
+        assert added == list(range(max(0, number - 3), number + 1))
