@@ -18,6 +18,7 @@ import inspect
 import io
 import itertools
 import re
+import sys
 import textwrap
 import typing
 from collections.abc import Callable
@@ -150,7 +151,7 @@ def deferred(function: Callable[..., None], options: type | None = None) -> Call
     hints = typing.get_type_hints(function, include_extras=True)
     parameters = []
     for parameter in signature.parameters.values():
-        annotation = hints.get(parameter.name, parameter.annotation)
+        annotation = as_declared(hints.get(parameter.name, parameter.annotation), parameter.default)
         if parameter.name == "config" and options is not None:
             annotation = Annotated[options, tyro.conf.arg(name="")]
             parameter = parameter.replace(default=options())
@@ -167,6 +168,17 @@ def deferred(function: Callable[..., None], options: type | None = None) -> Call
     parse.__doc__ = reflowed(function.__doc__ or "")
     parse.__name__ = function.__name__
     return parse
+
+
+def as_declared(hint: Any, default: Any) -> Any:
+    """The annotation as written: before Python 3.11 ``typing.get_type_hints`` wraps Optional
+    around a parameter's annotation when its default is None, which hides tyro's settings in
+    an ``Annotated`` inside it."""
+    if default is not None or sys.version_info >= (3, 11) or typing.get_origin(hint) is not typing.Union:
+        return hint
+    members = typing.get_args(hint)
+    annotated = [member for member in members if typing.get_origin(member) is Annotated]
+    return annotated[0] if len(members) == 2 and len(annotated) == 1 and type(None) in members else hint
 
 
 def parse_command(commands: dict[str, Callable[..., Command]], description: str, args: list[str]) -> Command:

@@ -38,4 +38,6 @@ def test_an_earlier_run_resumes(algo, tmp_path):
     result = dtd("train", "--resume", run, "--epochs", "2", "--no-progress")
     assert result.returncode == 0, result.stderr
     after = read_metrics(run)
-    assert after[:1] == before and [int(row["env_steps"]) for row in after] == [100, 200]
+    # The earlier epoch keeps its figures; figures added to the package since are blank in it.
+    assert [{name: row[name] for name in before[0]} for row in after[:1]] == before
+    assert [int(row["env_steps"]) for row in after] == [100, 200]
