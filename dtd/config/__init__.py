@@ -10,13 +10,14 @@ from dtd.config.presets import (
     PAPER_SETTINGS,
     flat_items,
     preset_config,
-    with_algorithm_batch,
+    with_algorithm_defaults,
     with_settings,
 )
 from dtd.config.settings import (
     HIGH_LEVEL_DEFAULTS,
     LOW_LEVEL_BATCH,
     LOW_LEVEL_DEFAULTS,
+    LOW_LEVEL_N_STEP,
     Algo,
     Collection,
     HighTarget,
@@ -30,6 +31,7 @@ __all__ = [
     "HIGH_LEVEL_DEFAULTS",
     "LOW_LEVEL_BATCH",
     "LOW_LEVEL_DEFAULTS",
+    "LOW_LEVEL_N_STEP",
     "PAPER_SETTINGS",
     "Algo",
     "Collection",
@@ -40,6 +42,6 @@ __all__ = [
     "TrainConfig",
     "flat_items",
     "preset_config",
-    "with_algorithm_batch",
+    "with_algorithm_defaults",
     "with_settings",
 ]

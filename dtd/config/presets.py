@@ -7,16 +7,19 @@ import dataclasses
 import json
 from typing import Any
 
-from dtd.config.settings import LOW_LEVEL_BATCH, Preset, TrainConfig
+from dtd.config.settings import LOW_LEVEL_BATCH, LOW_LEVEL_N_STEP, Preset, TrainConfig
 from dtd.errors import ConfigError
 
 
-def with_algorithm_batch(config: TrainConfig) -> TrainConfig:
-    """``config`` with a low-level batch of 0 replaced by its algorithm's (``LOW_LEVEL_BATCH``)."""
-    if config.learner.batch_size:
-        return config
-    learner = dataclasses.replace(config.learner, batch_size=LOW_LEVEL_BATCH[config.algo])
-    return dataclasses.replace(config, learner=learner)
+def with_algorithm_defaults(config: TrainConfig) -> TrainConfig:
+    """``config`` with a low-level batch of 0 and an n-step of 0 replaced by its algorithm's
+    (``LOW_LEVEL_BATCH``, ``LOW_LEVEL_N_STEP``)."""
+    if not config.learner.batch_size:
+        learner = dataclasses.replace(config.learner, batch_size=LOW_LEVEL_BATCH[config.algo])
+        config = dataclasses.replace(config, learner=learner)
+    if not config.n_step:
+        config = dataclasses.replace(config, n_step=LOW_LEVEL_N_STEP[config.algo])
+    return config
 
 
 def flat_items(config: TrainConfig) -> dict[str, Any]:

@@ -113,6 +113,16 @@ per update); on one machine HER learned FetchPush far sooner with 1,024. Dot-to-
 learned FetchPush as soon with 256 (0.5 at 145k against 140k, median of 3 seeds) in half the
 wall time, and FetchPickAndPlace far sooner (docs/tuning.md)."""
 
+LOW_LEVEL_N_STEP: dict[Algo, int] = {Algo.her: 1, Algo.ddpg: 1, Algo.dtd: 3}
+"""Rewards summed per sampled transition of ``her`` and ``ddpg`` and of dtd's low level, when not
+given. With 3, Dot-to-Dot's low level reached 0.9 eval success on FetchPush at 110k, 125k and
+120k env steps (seeds 0-2) against 175k, 160k and 145k with one-step returns
+(docs/tuning.md); ``her`` and ``ddpg`` keep one-step returns, as the reference."""
+
+SETTINGS_BEFORE_THEIR_KEY = {"n_step": 1}
+"""Settings whose default changed after runs were written without them: a ``config.json``
+without the key was written when the run used this value."""
+
 LOW_LEVEL_DEFAULTS = LearnerConfig(batch_size=0)
 """The learner of ``her``, ``ddpg`` and dtd's low level: the reference settings but the batch,
 which depends on the algorithm (``LOW_LEVEL_BATCH``)."""
@@ -155,9 +165,10 @@ class TrainConfig:
     past_goal_share: float = 0.0
     """HER: share of the relabelled goals that are goals given before (of a random stored
     step, any episode) instead of goals achieved later in the episode."""
-    n_step: int = 1
+    n_step: int = 0
     """Rewards summed per sampled transition before bootstrapping (n-step returns; dtd: the
-    low level's), cut at the episode's end; 1 is one-step DDPG."""
+    low level's), cut at the episode's end; 1 is one-step DDPG; 0: the algorithm's (dtd 3, her
+    and ddpg 1)."""
     noise_eps: float = 0.2
     """Exploration: std of Gaussian action noise, as a fraction of the largest action."""
     random_eps: float = 0.3
@@ -227,7 +238,10 @@ class TrainConfig:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
         """Inverse of :meth:`to_dict`; unknown keys and values of the wrong type are a
-        :class:`ConfigError` naming the setting, missing keys take defaults."""
+        :class:`ConfigError` naming the setting, missing keys take defaults (those of
+        :data:`SETTINGS_BEFORE_THEIR_KEY` their value from before the key existed)."""
+        if isinstance(data, dict):
+            data = {**SETTINGS_BEFORE_THEIR_KEY, **data}
         return cls(**_typed_fields(cls, data, ""))
 
 

@@ -63,7 +63,7 @@ def validate(config: TrainConfig) -> None:
             _positive(config.subgoal_max_distance),
             f"--subgoal-max-distance must be > 0, got {config.subgoal_max_distance}",
         ),
-        (config.n_step >= 1, f"--n-step must be 1 or more, got {config.n_step}"),
+        (config.n_step >= 0, f"--n-step must be 0 (the algorithm's) or more, got {config.n_step}"),
         (config.high_replay_k >= 0, f"--high-replay-k must be 0 or more, got {config.high_replay_k}"),
         (
             config.high_updates_per_cycle >= 1,

@@ -20,7 +20,7 @@ from dtd.agents.her import GoalStrategy, relabel_probability
 from dtd.agents.interface import Agent
 from dtd.agents.networks import BoxActionHead, SubgoalHead
 from dtd.agents.segments import segment_bounds, segment_window_end
-from dtd.config import Algo, Collection, HighTarget, RelabelWindow, TrainConfig, with_algorithm_batch
+from dtd.config import Algo, Collection, HighTarget, RelabelWindow, TrainConfig, with_algorithm_defaults
 from dtd.envs.make import make_envs
 from dtd.envs.spec import EnvSpec, reward_function
 from dtd.errors import ConfigError
@@ -42,7 +42,7 @@ class Components:
 
 def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env) -> Agent:
     """The agent ``config.algo`` names, with fresh networks and an empty replay."""
-    config = with_algorithm_batch(config)
+    config = with_algorithm_defaults(config)
     gamma = config.learner.gamma if config.learner.gamma is not None else spec.default_gamma()
     low = DDPGLearner(
         spec.obs_dim, spec.goal_dim, spec.action_dim, BoxActionHead(spec.action_max), config.learner, gamma

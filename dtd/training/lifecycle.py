@@ -8,7 +8,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from dtd.config import Preset, TrainConfig, flat_items, preset_config, with_algorithm_batch
+from dtd.config import Preset, TrainConfig, flat_items, preset_config, with_algorithm_defaults
 from dtd.envs.make import make_envs
 from dtd.envs.spec import EnvSpec
 from dtd.errors import CheckpointError, ConfigError, RunDirError
@@ -80,9 +80,9 @@ def train(
     else:
         config.validate()
         # The thread count is part of what makes a run repeatable: the run records it, and the
-        # batch its algorithm chose.
+        # batch and n-step its algorithm chose.
         config = dataclasses.replace(config, threads=resolved_threads(config.threads))
-        config = with_algorithm_batch(config)
+        config = with_algorithm_defaults(config)
         run = RunDir(Path(run_dir) if run_dir is not None else default_run_dir(config))
         if run.holds_run() and not force:
             raise RunDirError(

@@ -12,7 +12,7 @@ from dtd.config import (
     RelabelWindow,
     TrainConfig,
     preset_config,
-    with_algorithm_batch,
+    with_algorithm_defaults,
     with_settings,
 )
 from dtd.errors import ConfigError
@@ -51,12 +51,23 @@ def test_invalid_settings_name_their_option(change, flag):
 
 
 def test_the_low_levels_batch_is_the_algorithms_unless_given():
-    batch = {algo: with_algorithm_batch(TrainConfig(algo=algo)).learner.batch_size for algo in Algo}
+    batch = {algo: with_algorithm_defaults(TrainConfig(algo=algo)).learner.batch_size for algo in Algo}
     assert batch == {Algo.her: 1024, Algo.ddpg: 1024, Algo.dtd: 256}
     given = TrainConfig(algo=Algo.dtd, learner=LearnerConfig(batch_size=512))
-    assert with_algorithm_batch(given) == given
-    assert with_algorithm_batch(preset_config(Preset.paper, algo=Algo.her)).learner.batch_size == 256
-    assert with_algorithm_batch(TrainConfig(algo=Algo.dtd)).high.batch_size == 256
+    assert with_algorithm_defaults(given).learner == given.learner
+    assert with_algorithm_defaults(preset_config(Preset.paper, algo=Algo.her)).learner.batch_size == 256
+    assert with_algorithm_defaults(TrainConfig(algo=Algo.dtd)).high.batch_size == 256
+
+
+def test_n_step_is_the_algorithms_unless_given_and_one_for_runs_written_before_it():
+    n_step = {algo: with_algorithm_defaults(TrainConfig(algo=algo)).n_step for algo in Algo}
+    assert n_step == {Algo.her: 1, Algo.ddpg: 1, Algo.dtd: 3}
+    assert with_algorithm_defaults(TrainConfig(algo=Algo.dtd, n_step=5)).n_step == 5
+    assert with_algorithm_defaults(preset_config(Preset.paper, algo=Algo.dtd)).n_step == 1
+    written = TrainConfig(algo=Algo.dtd).to_dict()
+    assert TrainConfig.from_dict(written).n_step == 0
+    del written["n_step"]  # a config.json from before the setting existed
+    assert TrainConfig.from_dict(written).n_step == 1
     with pytest.raises(ConfigError, match="--batch-size must be at least 0"):
         dataclasses.replace(VALID, learner=LearnerConfig(batch_size=-1)).validate()
     with pytest.raises(ConfigError, match=r"--high\.batch-size must be at least 1"):
