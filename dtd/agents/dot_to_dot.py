@@ -238,7 +238,7 @@ class DotToDotAgent:
         goal_dim = subgoals.shape[-1]
         rewards = self.reward_fn(reached_goals.reshape(-1, goal_dim), subgoals.reshape(-1, goal_dim))
         start = episodes.achieved_goal[:, :1]
-        progress, off_line = self._placement(episodes)
+        progress, off_line = self._placement(episodes, self._goal_away(episodes))
         return {
             "subgoal_reached": float(np.mean(rewards == 0.0)),
             "subgoal_from_start": float(np.mean(np.linalg.norm(subgoals - start, axis=-1))),
@@ -258,7 +258,7 @@ class DotToDotAgent:
         start, goal = episodes.achieved_goal[:, 0], episodes.desired_goal
         away = self._goal_away(episodes)
         distance = np.linalg.norm(goal - start, axis=-1)[away]
-        progress, off_line = self._placement(episodes)
+        progress, off_line = self._placement(episodes, away)
         order = np.argsort(distance, kind="stable")
         summary: list[dict[str, Any]] = []
         if not len(order):
@@ -279,10 +279,9 @@ class DotToDotAgent:
         """(B,) whether an episode's goal is not already met at its start."""
         return self.reward_fn(episodes.achieved_goal[:, 0], episodes.desired_goal) != 0.0
 
-    def _placement(self, episodes: Episodes) -> tuple[np.ndarray, np.ndarray]:
-        """:func:`subgoal_placement` of the intermediate sub-goals, over the episodes whose
-        goal is not met at their start: (B', N-1) each."""
-        away = self._goal_away(episodes)
+    def _placement(self, episodes: Episodes, away: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`subgoal_placement` of the intermediate sub-goals, over the episodes ``away``
+        (those whose goal is not met at their start): (B', N-1) each."""
         return subgoal_placement(
             episodes.achieved_goal[away, 0],
             episodes.step_goal[away][:, self.bounds[:-2]],

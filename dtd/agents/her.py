@@ -36,6 +36,29 @@ def future_indices(t: np.ndarray, window_end: np.ndarray, uniform: np.ndarray) -
     return t + 1 + np.minimum((uniform * span).astype(np.int64), span - 1)
 
 
+def window_rewards(
+    achieved_goal: np.ndarray,
+    episode: np.ndarray,
+    start: np.ndarray,
+    stop: np.ndarray,
+    goal: np.ndarray,
+    reward_fn: RewardFn,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rewards of steps t = start .. stop-1 of each row's episode against its goal,
+    reward_fn(achieved_goal[episode, t + 1], goal), as (B, L) for the longest window L, and the
+    (B, L) mask of the steps inside each row's window (the rest are padding)."""
+    longest = int(np.max(stop - start))
+    offsets = np.arange(longest)[None, :]
+    inside = offsets < (stop - start)[:, None]
+    reached = np.minimum(start[:, None] + 1 + offsets, stop[:, None])  # padding repeats the last
+    batch, goal_dim = goal.shape
+    rewards = reward_fn(
+        achieved_goal[episode[:, None], reached].reshape(-1, goal_dim),
+        np.repeat(goal, longest, axis=0),
+    ).reshape(batch, longest)
+    return rewards, inside
+
+
 def sample_transitions(
     episodes: Episodes,
     batch_size: int,
@@ -75,29 +98,20 @@ def sample_transitions(
         past_t = rng.integers(0, horizon, size=batch_size)[past]
         goal[past] = episodes.step_goal[past_episode, past_t]
     # The reward of step t is earned by the goal it reached: the next achieved goal.
+    discount = None
     if n_step == 1:
-        return Batch(
-            obs=episodes.obs[episode, t],
-            goal=goal,
-            action=episodes.action[episode, t],
-            reward=reward_fn(episodes.achieved_goal[episode, t + 1], goal),
-            next_obs=episodes.obs[episode, t + 1],
-        )
-    steps = np.minimum(n_step, horizon - t)  # (B,) rewards summed
-    offsets = np.arange(n_step)[None, :]
-    inside = offsets < steps[:, None]
-    reached = np.minimum(t[:, None] + 1 + offsets, horizon)
-    goal_dim = goal.shape[-1]
-    rewards = reward_fn(
-        episodes.achieved_goal[episode[:, None], reached].reshape(-1, goal_dim),
-        np.repeat(goal, n_step, axis=0),
-    ).reshape(batch_size, n_step)
-    discounts = gamma ** offsets.astype(np.float64)
+        reward, next_t = reward_fn(episodes.achieved_goal[episode, t + 1], goal), t + 1
+    else:
+        next_t = np.minimum(t + n_step, horizon)
+        rewards, inside = window_rewards(episodes.achieved_goal, episode, t, next_t, goal, reward_fn)
+        discounts = gamma ** np.arange(rewards.shape[1], dtype=np.float64)
+        reward = np.sum(rewards * discounts * inside, axis=1).astype(np.float32)
+        discount = (gamma ** (next_t - t).astype(np.float64)).astype(np.float32)
     return Batch(
         obs=episodes.obs[episode, t],
         goal=goal,
         action=episodes.action[episode, t],
-        reward=np.sum(rewards * discounts * inside, axis=1).astype(np.float32),
-        next_obs=episodes.obs[episode, t + steps],
-        discount=(gamma ** steps.astype(np.float64)).astype(np.float32),
+        reward=reward,
+        next_obs=episodes.obs[episode, next_t],
+        discount=discount,
     )

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from dtd.agents.her import future_indices
+from dtd.agents.her import future_indices, window_rewards
 from dtd.agents.records import Batch, Episodes
 from dtd.envs.spec import RewardFn
 
@@ -43,15 +43,7 @@ def segment_mean_reward(
     reward_fn: RewardFn,
 ) -> np.ndarray:
     """Mean over steps t = start .. stop-1 of reward_fn(achieved_goal[episode, t + 1], goal)."""
-    longest = int(np.max(stop - start))
-    offsets = np.arange(longest)[None, :]
-    inside = offsets < (stop - start)[:, None]
-    reached = np.minimum(start[:, None] + 1 + offsets, stop[:, None])  # (B, L), clipped rows masked out
-    batch, goal_dim = goal.shape
-    rewards = reward_fn(
-        achieved_goal[episode[:, None], reached].reshape(-1, goal_dim),
-        np.repeat(goal, longest, axis=0),
-    ).reshape(batch, longest)
+    rewards, inside = window_rewards(achieved_goal, episode, start, stop, goal, reward_fn)
     return np.sum(rewards * inside, axis=1) / (stop - start)
 
 
