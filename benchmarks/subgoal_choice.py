@@ -24,6 +24,7 @@ import numpy as np
 
 from dtd.agents.dot_to_dot import DotToDotAgent
 from dtd.agents.segments import subgoal_placement
+from dtd.training.components import close_all
 from dtd.training.trained_run import load_run
 
 
@@ -61,9 +62,7 @@ def compare(run_dir: Path, episodes: int, points: int, checkpoint: str) -> dict[
         progress, _ = subgoal_placement(start[None], np.stack([chosen, best])[None], goal[None])
         actor_progress.append(progress[0, 0])
         best_progress.append(progress[0, 1])
-    loaded.components.collector.close()
-    for item in loaded.components.eval_envs:
-        item.close()
+    close_all(loaded.components)
     return {
         "gap_median": float(np.median(gaps)),
         "gap_p90": float(np.percentile(gaps, 90)),
