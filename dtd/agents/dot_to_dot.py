@@ -17,8 +17,10 @@ from dtd.agents.her import sample_transitions
 from dtd.agents.interface import mean_metrics
 from dtd.agents.networks import SubgoalHead
 from dtd.agents.records import Batch, Episodes
+from dtd.agents.rotations import multiply, random_rotations
 from dtd.agents.segments import (
     episode_plan,
+    goal_separation,
     high_level_input,
     sample_segment_transitions,
     subgoal_placement,
@@ -53,6 +55,10 @@ class SubgoalExploration:
     """Std of the perturbation of the achieved goal."""
     noise: float
     """Std of the noise on the high level's sub-goals."""
+    rotation_angle: float = 0.0
+    """For goals with a rotation: where above 0, a perturbation sub-goal's rotation is the
+    achieved one turned by a random angle up to this (radians) about a random axis, rather
+    than the Gaussian perturbation of its quaternion's entries."""
 
 
 class DotToDotAgent:
@@ -169,6 +175,10 @@ class DotToDotAgent:
         proposed = self.propose_subgoals(obs, achieved_goal, desired_goal)
         proposed = proposed + explore.noise * rng.standard_normal((count, goal_dim))
         take_perturbed = rng.random(count) < self.eps
+        if explore.rotation_angle > 0.0 and self.quaternion is not None:
+            first, stop = self.quaternion
+            turns = random_rotations(rng, count, explore.rotation_angle)
+            perturbed[:, first:stop] = multiply(achieved_goal[:, first:stop], turns)
         chosen = np.where(take_perturbed[:, None], perturbed, proposed)
         return self.high.head.project(torch.as_tensor(chosen, dtype=torch.float32)).numpy()
 
@@ -227,27 +237,37 @@ class DotToDotAgent:
         metrics["subgoal_eps"] = self.eps
         return metrics
 
+    @property
+    def quaternion(self) -> tuple[int, int] | None:
+        """Goal entries holding a rotation (the Hand tasks), if any."""
+        return self.high.head.quaternion
+
     def episode_metrics(self, episodes: Episodes) -> dict[str, float]:
         """How the sub-goals of these episodes went: reached at their segment's end, how far
         they lay from the start and from the goal, and where along the way (progress along
         the start-to-goal line and distance off it, over episodes whose goal is not met at
-        their start; NaN where every goal is). Intermediate sub-goals only."""
+        their start; NaN where every goal is). Intermediate sub-goals only. For goals with a
+        rotation, distances are of the positions, ``*_angle_*`` the rotations' angles in
+        degrees, and the way is the rotation's (off it in degrees)."""
         starts, ends = self.bounds[:-2], self.bounds[1:-1]
         subgoals = episodes.step_goal[:, starts]  # (B, N-1, G)
         reached_goals = episodes.achieved_goal[:, ends]
         goal_dim = subgoals.shape[-1]
         rewards = self.reward_fn(reached_goals.reshape(-1, goal_dim), subgoals.reshape(-1, goal_dim))
-        start = episodes.achieved_goal[:, :1]
+        from_start = goal_separation(episodes.achieved_goal[:, :1], subgoals, self.quaternion)
+        from_goal = goal_separation(episodes.desired_goal[:, None], subgoals, self.quaternion)
         progress, off_line = self._placement(episodes, self._goal_away(episodes))
-        return {
+        metrics = {
             "subgoal_reached": float(np.mean(rewards == 0.0)),
-            "subgoal_from_start": float(np.mean(np.linalg.norm(subgoals - start, axis=-1))),
-            "subgoal_from_goal": float(
-                np.mean(np.linalg.norm(subgoals - episodes.desired_goal[:, None], axis=-1))
-            ),
-            "subgoal_progress": float(np.mean(progress)) if progress.size else float("nan"),
-            "subgoal_off_line": float(np.mean(off_line)) if off_line.size else float("nan"),
+            "subgoal_from_start": float(np.mean(from_start["distance"])),
+            "subgoal_from_goal": float(np.mean(from_goal["distance"])),
         }
+        if "angle" in from_start:
+            metrics["subgoal_angle_from_start"] = float(np.mean(from_start["angle"]))
+            metrics["subgoal_angle_from_goal"] = float(np.mean(from_goal["angle"]))
+        metrics["subgoal_progress"] = float(np.mean(progress)) if progress.size else float("nan")
+        metrics["subgoal_off_line"] = float(np.mean(off_line)) if off_line.size else float("nan")
+        return metrics
 
     def placement_by_distance(self, episodes: Episodes, groups: int = 3) -> list[dict[str, Any]]:
         """Where the intermediate sub-goals lay along the way, for ``groups`` groups of
@@ -255,9 +275,10 @@ class DotToDotAgent:
         episodes whose goal is met at their start left out): per group its distance range,
         episodes, success, and per sub-goal the mean progress along the start-to-goal line
         (0 start, 1 goal) and mean distance off it."""
-        start, goal = episodes.achieved_goal[:, 0], episodes.desired_goal
         away = self._goal_away(episodes)
-        distance = np.linalg.norm(goal - start, axis=-1)[away]
+        separation = goal_separation(episodes.achieved_goal[:, 0], episodes.desired_goal, self.quaternion)
+        separation_key = "goal_angle" if "angle" in separation else "goal_distance"
+        distance = separation.get("angle", separation["distance"])[away]
         progress, off_line = self._placement(episodes, away)
         order = np.argsort(distance, kind="stable")
         summary: list[dict[str, Any]] = []
@@ -266,7 +287,7 @@ class DotToDotAgent:
         for members in np.array_split(order, min(groups, len(order))):
             summary.append(
                 {
-                    "goal_distance": [round(float(distance[members][i]), 4) for i in (0, -1)],
+                    separation_key: [round(float(distance[members][i]), 4) for i in (0, -1)],
                     "episodes": len(members),
                     "success": float(np.mean(episodes.success[away][members])),
                     "progress": [round(float(v), 3) for v in np.mean(progress[members], axis=0)],
@@ -286,12 +307,16 @@ class DotToDotAgent:
             episodes.achieved_goal[away, 0],
             episodes.step_goal[away][:, self.bounds[:-2]],
             episodes.desired_goal[away],
+            self.quaternion,
         )
 
     def plan(self, episodes: Episodes) -> list[dict[str, Any]]:
         """Per episode: the start, each segment's sub-goal, where the segment ended and whether
         it reached the sub-goal, the goal."""
-        return [episode_plan(episodes, index, self.bounds, self.reward_fn) for index in range(episodes.count)]
+        return [
+            episode_plan(episodes, index, self.bounds, self.reward_fn, self.quaternion)
+            for index in range(episodes.count)
+        ]
 
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
         state: dict[str, Any] = {"low": self.low.state_dict(), "high": self.high.state_dict()}

@@ -13,7 +13,11 @@ import numpy as np
 
 from dtd.agents.her import future_indices, window_rewards
 from dtd.agents.records import Batch, Episodes
+from dtd.agents.rotations import angle_between, rotation_placement
 from dtd.envs.spec import RewardFn
+
+Quaternion = tuple[int, int] | None
+"""Goal entries [start, stop) that hold a unit quaternion (a rotation), if any."""
 
 
 def segment_bounds(horizon: int, segments: int) -> np.ndarray:
@@ -123,15 +127,23 @@ def sample_segment_transitions(
 
 
 def subgoal_placement(
-    start: np.ndarray, subgoals: np.ndarray, goal: np.ndarray
+    start: np.ndarray, subgoals: np.ndarray, goal: np.ndarray, quaternion: Quaternion = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Where sub-goals lie along the way from the start to the goal.
 
     ``start`` and ``goal`` (B, G), ``subgoals`` (B, K, G). Returns ``progress`` (B, K), the
     projection of each sub-goal onto the start-to-goal line as a fraction of that line (0 at
     the start, 1 at the goal, below 0 behind the start), and ``off_line`` (B, K), its distance
-    from that line. Both are NaN for an episode whose goal is its start.
+    from that line. Both are NaN for an episode whose goal is its start. Goals with a rotation
+    (``quaternion``) are placed along the rotation from the start's to the goal's, off the
+    line in degrees (:func:`dtd.agents.rotations.rotation_placement`).
     """
+    if quaternion is not None:
+        first, stop = quaternion
+        progress, off_line = rotation_placement(
+            start[:, first:stop], subgoals[..., first:stop], goal[:, first:stop]
+        )
+        return progress, np.degrees(off_line)
     line = goal - start  # (B, G)
     length_sq = np.sum(line * line, axis=-1)  # (B,)
     offset = subgoals - start[:, None]  # (B, K, G)
@@ -144,22 +156,59 @@ def subgoal_placement(
     return progress, off_line
 
 
+def goal_separation(
+    first: np.ndarray, second: np.ndarray, quaternion: Quaternion = None
+) -> dict[str, np.ndarray]:
+    """How far apart goals are: ``distance``, the Euclidean distance of their positions (every
+    entry outside the rotation), and for goals with a rotation ``angle``, the angle in degrees
+    of the rotation from one to the other."""
+    if quaternion is None:
+        return {"distance": np.linalg.norm(second - first, axis=-1)}
+    begin, stop = quaternion
+    position = np.r_[0:begin, stop : first.shape[-1]]
+    return {
+        "distance": np.linalg.norm(second[..., position] - first[..., position], axis=-1),
+        "angle": np.degrees(angle_between(first[..., begin:stop], second[..., begin:stop])),
+    }
+
+
 def episode_plan(
-    episodes: Episodes, index: int, bounds: np.ndarray | None, reward_fn: RewardFn | None = None
+    episodes: Episodes,
+    index: int,
+    bounds: np.ndarray | None,
+    reward_fn: RewardFn | None = None,
+    quaternion: Quaternion = None,
 ) -> dict[str, Any]:
     """Episode ``index``'s plan: the start; each segment's sub-goal, the achieved goal at the
     segment's end and whether that reached the sub-goal by the task's own reward (none without
-    ``bounds``; no verdicts without ``reward_fn``); the goal, the final achieved goal, success."""
+    ``bounds``; no verdicts without ``reward_fn``); the goal, the final achieved goal, success.
+    For goals with a rotation, ``angles`` (degrees): from the start to each sub-goal, from each
+    segment's end to its sub-goal, from each sub-goal to the goal, from the start and from the
+    final achieved goal to the goal."""
     achieved = episodes.achieved_goal[index]
+    goal = episodes.desired_goal[index]
     subgoals = np.zeros((0, achieved.shape[-1])) if bounds is None else episodes.step_goal[index, bounds[:-1]]
     ends = achieved[bounds[1:]] if bounds is not None else np.zeros_like(subgoals)
     reached = [] if reward_fn is None or bounds is None else (reward_fn(ends, subgoals) == 0.0).tolist()
-    return {
+    plan: dict[str, Any] = {
         "start": achieved[0].tolist(),
         "subgoals": subgoals.tolist(),
         "segment_ends": ends.tolist(),
         "reached": reached,
-        "goal": episodes.desired_goal[index].tolist(),
+        "goal": goal.tolist(),
         "final": achieved[-1].tolist(),
         "success": bool(episodes.success[index]),
     }
+    if quaternion is not None:
+
+        def angles(first: np.ndarray, second: np.ndarray) -> list[float]:
+            return np.round(goal_separation(first, second, quaternion)["angle"], 1).reshape(-1).tolist()
+
+        plan["angles"] = {
+            "start_to_subgoal": angles(achieved[None, 0], subgoals),
+            "segment_end_to_subgoal": angles(ends, subgoals),
+            "subgoal_to_goal": angles(subgoals, goal[None]),
+            "start_to_goal": angles(achieved[None, 0], goal[None])[0],
+            "final_to_goal": angles(achieved[None, -1], goal[None])[0],
+        }
+    return plan

@@ -162,11 +162,12 @@ def _numbers(text: str, option: str) -> list[float]:
 
 
 def format_plan(number: int, plan: dict) -> str:
-    """One episode's plan as readable lines."""
+    """One episode's plan as readable lines (for goals with a rotation, with its angles)."""
 
     def point(values: list[float]) -> str:
         return "(" + ", ".join(f"{v:.3f}" for v in values) + ")"
 
+    angles = plan.get("angles")
     lines = [
         f"episode {number}: {'success' if plan['success'] else 'failure'}",
         f"  start    {point(plan['start'])}",
@@ -178,22 +179,43 @@ def format_plan(number: int, plan: dict) -> str:
         lines.append(
             f"  segment {segment}: sub-goal {point(subgoal)}  reached: {verdict}, ended at {point(end)}"
         )
+        if angles:
+            lines.append(
+                f"    turned {angles['start_to_subgoal'][segment]:.0f} deg from the start, "
+                f"{angles['subgoal_to_goal'][segment]:.0f} deg from the goal; "
+                f"ended {angles['segment_end_to_subgoal'][segment]:.0f} deg from it"
+            )
     lines.append(f"  goal     {point(plan['goal'])}")
+    if angles:
+        lines.append(
+            f"    {angles['start_to_goal']:.0f} deg from the start; "
+            f"the episode ended {angles['final_to_goal']:.0f} deg from it"
+        )
     return "\n".join(lines)
 
 
 def format_placement(groups: list[dict]) -> str:
-    """Where the sub-goals lay along the way, per group of goal distances, as a table."""
-    lines = [
-        "sub-goals along the way (progress: 0 at the start, 1 at the goal; off line: distance from it)",
-        "  goal distance    episodes  success  progress per sub-goal  off line per sub-goal",
-    ]
+    """Where the sub-goals lay along the way, per group of goal distances (or, for goals with a
+    rotation, goal angles), as a table."""
+    rotation = bool(groups) and "goal_angle" in groups[0]
+    if rotation:
+        lines = [
+            "sub-goal rotations along the turn from the start to the goal (progress: 0 at the start,",
+            "1 at the goal; off line: degrees from the shortest turn)",
+            "  goal angle (deg)  episodes  success  progress per sub-goal  off line per sub-goal",
+        ]
+    else:
+        lines = [
+            "sub-goals along the way (progress: 0 at the start, 1 at the goal; off line: distance from it)",
+            "  goal distance    episodes  success  progress per sub-goal  off line per sub-goal",
+        ]
     for group in groups:
-        low, high = group["goal_distance"]
+        low, high = group["goal_angle"] if rotation else group["goal_distance"]
         progress = " ".join(f"{value:.2f}" for value in group["progress"])
-        off_line = " ".join(f"{value:.3f}" for value in group["off_line"])
+        off_line = " ".join(f"{value:.{1 if rotation else 3}f}" for value in group["off_line"])
         counts = f"{group['episodes']:>8}  {group['success']:>7.2f}"
-        lines.append(f"  {low:.3f} - {high:.3f}  {counts}  {progress:<21}  {off_line}")
+        span = f"{low:5.1f} - {high:5.1f}    " if rotation else f"{low:.3f} - {high:.3f}"
+        lines.append(f"  {span}  {counts}  {progress:<21}  {off_line}")
     if not groups:
         lines.append("  (every goal was met at its episode's start)")
     return "\n".join(lines)

@@ -194,6 +194,10 @@ class TrainConfig:
     subgoal_sigma: float = 0.1
     """dtd: std of the Gaussian perturbation of the achieved goal proposed as a sub-goal (the
     paper: 0.05)."""
+    subgoal_rotation_angle: float = 0.0
+    """dtd, goals with a rotation (the Hand tasks): perturbation sub-goals turn the achieved
+    rotation by a random angle of at most this many degrees about a random axis (0: Gaussian
+    noise of std --subgoal-sigma on the quaternion's entries)."""
     subgoal_eps_start: float = 1.0
     """dtd: probability of a perturbation sub-goal (instead of the high level's) at the start."""
     subgoal_eps_floor: float = 0.1

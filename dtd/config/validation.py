@@ -48,6 +48,10 @@ def validate(config: TrainConfig) -> None:
             f"--subgoal-sigma must be >= 0, got {config.subgoal_sigma}",
         ),
         (
+            _finite_in(config.subgoal_rotation_angle, 0, 180),
+            f"--subgoal-rotation-angle must lie in [0, 180] degrees, got {config.subgoal_rotation_angle}",
+        ),
+        (
             _finite_in(config.subgoal_eps_start, 0, 1) and _finite_in(config.subgoal_eps_floor, 0, 1),
             "--subgoal-eps-start and --subgoal-eps-floor must lie in [0, 1]",
         ),

@@ -10,7 +10,7 @@ geoms added to the scene, so :meth:`SceneRenderer.project` can say where they la
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -172,9 +172,11 @@ def render_episode(
     renderer: SceneRenderer,
     rng: np.random.Generator,
     bounds: np.ndarray | None,
+    plan_of: Callable[[Episodes], list[dict[str, Any]]] | None = None,
 ) -> RenderedEpisode:
     """Play one deterministic episode, rendering each state with the goal and (``bounds``
-    given: a dtd agent with those segment bounds) the sub-goal in force."""
+    given: a dtd agent with those segment bounds) the sub-goal in force; ``plan_of`` (the
+    agent's ``plan``) gives the key frames' captions their figures."""
     frames: list[np.ndarray] = []
     goal_pixels: list[tuple[float, float]] = []
     subgoal_pixels: list[tuple[float, float] | None] = []
@@ -189,21 +191,44 @@ def render_episode(
         subgoal_pixels.append(renderer.project(markers[-1].position) if subgoal is not None else None)
 
     episode = run_episodes([env], agent, spec, False, rng, on_step=on_step)
-    keys = key_frames(spec.horizon, bounds, bool(episode.success[0]))
+    plan = plan_of(episode)[0] if plan_of is not None else None
+    keys = key_frames(spec.horizon, bounds, bool(episode.success[0]), plan)
     return RenderedEpisode(frames, episode, keys, goal_pixels, subgoal_pixels)
 
 
-def key_frames(horizon: int, bounds: np.ndarray | None, success: bool) -> list[tuple[int, str]]:
+def key_frames(
+    horizon: int, bounds: np.ndarray | None, success: bool, plan: dict[str, Any] | None = None
+) -> list[tuple[int, str]]:
     """(frame, caption) pairs: the start, each segment's end (when the next sub-goal is set)
-    and the final state; without segments, the start, the middle and the end."""
+    and the final state; without segments, the start, the middle and the end. With a ``plan``
+    that has ``angles`` (goals with a rotation), the captions give them in degrees: the first
+    sub-goal's turn from the start and the goal's, how far each segment ended from its
+    sub-goal (reached or missed), and how far the episode ended from the goal."""
     final = f"final ({'success' if success else 'failure'})"
     if bounds is None:
         return [(0, "start"), (horizon // 2, f"t = {horizon // 2}"), (horizon, final)]
-    frames = [(0, "start: sub-goal 1 set")]
+    angles = (plan or {}).get("angles")
+    reached = (plan or {}).get("reached") or []
+    start = "start: sub-goal 1 set"
+    if angles:
+        start += (
+            f"\n{angles['start_to_subgoal'][0]:.0f}\N{DEGREE SIGN} from here; "
+            f"goal {angles['start_to_goal']:.0f}\N{DEGREE SIGN} away"
+        )
+    frames = [(0, start)]
     for number, end in enumerate(bounds[1:-1], start=1):
         last = number + 1 == len(bounds) - 1
         following = "the goal is pursued" if last else f"sub-goal {number + 1} set"
-        frames.append((int(end), f"segment {number} ends: {following}"))
+        caption = f"segment {number} ends: {following}"
+        if angles:
+            verdict = "reached" if number <= len(reached) and reached[number - 1] else "missed"
+            caption += (
+                f"\nsub-goal {number} {verdict}, "
+                f"{angles['segment_end_to_subgoal'][number - 1]:.0f}\N{DEGREE SIGN} off"
+            )
+        frames.append((int(end), caption))
+    if angles:
+        final += f"\n{angles['final_to_goal']:.0f}\N{DEGREE SIGN} from the goal"
     frames.append((horizon, final))
     return frames
 
@@ -278,7 +303,8 @@ def render_run(
     written = []
     try:
         for number in range(1, episodes + 1):
-            rendered = render_episode(env, agent, spec, renderer, components.rng, bounds)
+            plan_of = agent.plan if isinstance(agent, DotToDotAgent) else None
+            rendered = render_episode(env, agent, spec, renderer, components.rng, bounds, plan_of)
             name = f"episode-{number}"
             title = (
                 f"{loaded.config.algo.value} on {spec.env_id}, epoch {loaded.snapshot['state']['epoch']}, "

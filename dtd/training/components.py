@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 import os
 
 import gymnasium as gym
@@ -85,7 +86,9 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env) -> Agent:
         reward_fn=reward_fn,
         bounds=bounds,
         action_noise=noise,
-        exploration=SubgoalExploration(schedule, config.subgoal_sigma, config.subgoal_noise),
+        exploration=SubgoalExploration(
+            schedule, config.subgoal_sigma, config.subgoal_noise, math.radians(config.subgoal_rotation_angle)
+        ),
         low_relabel_prob=relabel_probability(GoalStrategy.future, config.replay_k),
         low_window_end=window,
         low_past_share=config.past_goal_share,

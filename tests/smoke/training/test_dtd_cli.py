@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tests.helpers import TINY, dtd, read_metrics, without_times
@@ -99,3 +100,50 @@ def test_a_trained_high_level_can_be_queried_at_any_sub_goal(push_dtd):
     values = agent.subgoal_values(observation, observation["desired_goal"], candidates)
     assert values.shape == (12,) and np.all(np.isfinite(values))
     env.close()
+
+
+def test_a_hand_run_places_poses_and_reports_their_angles(tmp_path):
+    from dtd.agents.rotations import angle_between
+    from dtd.envs.make import make_env
+    from dtd.envs.spec import env_spec
+
+    run_dir = tmp_path / "hand"
+    name = "HandManipulateBlockRotateZ-v1"
+    args = [
+        "--env",
+        name,
+        "--algo",
+        "dtd",
+        "--seed",
+        "3",
+        *TINY,
+        "--epochs",
+        "2",
+        "--subgoal-rotation-angle",
+        "60",
+    ]
+    result = dtd("train", *args, "--run-dir", run_dir)
+    assert result.returncode == 0, result.stderr
+    for row in read_metrics(run_dir):
+        for split in ("train", "eval"):
+            assert 0.0 < float(row[f"{split}_subgoal_angle_from_start"]) <= 180.0
+            assert 0.0 <= float(row[f"{split}_subgoal_angle_from_goal"]) <= 180.0
+            assert np.isfinite(float(row[f"{split}_subgoal_progress"]))
+    result = dtd("eval", run_dir, "--episodes", "3", "--show-subgoals")
+    assert result.returncode == 0, result.stderr
+    figures = json.loads(result.stdout.strip().splitlines()[-1])
+    assert "goal_angle" in figures["subgoal_placement"][0]
+    assert "deg from the start" in result.stdout and "goal angle (deg)" in result.stdout
+    # Sub-goals a trained high level chose over whole episodes: unit quaternions in the goal box.
+    result = dtd("render", run_dir, "--episodes", "2", "--width", "64", "--height", "64")
+    assert result.returncode == 0, result.stderr
+    env = make_env(name)
+    spec = env_spec(env, name)
+    env.close()
+    for plan in json.loads((run_dir / "render" / "plans.json").read_text()):
+        subgoals = np.array(plan["subgoals"])
+        assert np.allclose(np.linalg.norm(subgoals[:, 3:], axis=-1), 1.0, atol=1e-5)
+        assert np.all(subgoals >= np.array(spec.goal_low) - 1e-6)
+        assert np.all(subgoals <= np.array(spec.goal_high) + 1e-6)
+        start_to_subgoal = np.degrees(angle_between(np.array(plan["start"])[3:], subgoals[:, 3:]))
+        assert np.allclose(plan["angles"]["start_to_subgoal"], start_to_subgoal, atol=0.06)

@@ -13,6 +13,7 @@ from dtd.agents.dot_to_dot import DotToDotAgent, HandOverSchedule, SubgoalExplor
 from dtd.agents.exploration import ActionNoise
 from dtd.agents.networks import BoxActionHead, SubgoalHead
 from dtd.agents.records import Episodes
+from dtd.agents.rotations import angle_between, from_rotation_vector
 from dtd.agents.segments import (
     sample_segment_transitions,
     segment_bounds,
@@ -344,3 +345,71 @@ def test_the_agent_passes_its_high_level_choices_to_the_batch():
     agent.high_actor_all_segments, agent.high_observed_gamma = False, 0.5
     batch = agent._high_batch(labelled_episodes(), 64, np.random.default_rng(6))
     assert batch.actor_rows is not None and batch.next_value_given is not None
+
+
+def make_pose_agent(rotation_angle: float) -> DotToDotAgent:
+    """An agent whose goals are poses: a position, then a unit quaternion (the Hand tasks)."""
+    torch.manual_seed(0)
+    goal_dim = 7
+    config = LearnerConfig(hidden_sizes=(16,), batch_size=8)
+    low = DDPGLearner(OBS, goal_dim, ACT, BoxActionHead(1.0), config, 0.9)
+    head = SubgoalHead(0.3, (-5.0,) * 3 + (-1.0,) * 4, (5.0,) * 3 + (1.0,) * 4, (3, 7))
+    high = DDPGLearner(OBS + goal_dim, goal_dim, goal_dim, head, config, 0.5)
+
+    def within_a_tenth(achieved: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        return -(angle_between(achieved[..., 3:], goal[..., 3:]) > 0.1).astype(np.float32)
+
+    return DotToDotAgent(
+        low=low,
+        high=high,
+        buffer=EpisodeBuffer(20, T, OBS, goal_dim, ACT),
+        reward_fn=within_a_tenth,
+        bounds=segment_bounds(T, 2),
+        action_noise=ActionNoise(0.2, 0.3, 1.0),
+        exploration=SubgoalExploration(HandOverSchedule(1.0, 1.0, 0, 1), 0.1, 0.1, rotation_angle),
+        low_relabel_prob=0.8,
+        low_window_end=None,
+        high_relabel_prob=0.8,
+        hindsight_action_prob=0.0,
+        high_updates=1,
+    )
+
+
+@pytest.mark.parametrize("rotation_angle", [0.0, 0.5])
+def test_perturbation_sub_goals_are_poses_turned_from_the_achieved_rotation(rotation_angle):
+    agent = make_pose_agent(rotation_angle)
+    rng = np.random.default_rng(3)
+    achieved = np.tile([0.5, 0.5, 0.5, np.cos(0.4), 0.0, 0.0, np.sin(0.4)], (2000, 1))
+    subgoal = agent.step_goal(np.zeros((2000, OBS)), achieved, np.zeros((2000, 7)), 0, True, rng)
+    assert np.allclose(np.linalg.norm(subgoal[:, 3:], axis=-1), 1.0, atol=1e-5)
+    assert np.allclose(subgoal[:, :3].std(axis=0), 0.1, atol=0.01)  # positions: Gaussian
+    turned = angle_between(achieved[:, 3:], subgoal[:, 3:])
+    if rotation_angle:
+        assert turned.max() <= rotation_angle + 1e-5 and turned.mean() == pytest.approx(0.25, abs=0.01)
+    else:  # Gaussian noise on the entries, then scaled back to unit length: no bound
+        assert turned.max() > 0.5
+
+
+def test_pose_sub_goals_are_reported_as_angles_along_the_rotation_to_the_goal():
+    agent = make_pose_agent(0.0)
+    count = 2
+    identity, quarter = [1.0, 0, 0, 0], from_rotation_vector(np.array([0, 0, np.pi / 2])).tolist()
+    eighth = from_rotation_vector(np.array([0, 0, np.pi / 4])).tolist()
+    achieved = np.tile(np.array([0.0, 0.0, 0.0, *identity], np.float32), (count, T + 1, 1))
+    achieved[:, -1, 3:] = quarter  # the goal's rotation reached at the end
+    step_goal = np.tile(np.array([1.0, 0.0, 0.0, *eighth], np.float32), (count, T, 1))
+    goal = np.tile(np.array([0.0, 0.0, 0.0, *quarter], np.float32), (count, 1))
+    step_goal[:, T // 2 :] = goal[:, None]
+    obs = np.zeros((count, T + 1, OBS), np.float32)
+    episodes = Episodes(obs, achieved, np.zeros((count, T, ACT), np.float32), step_goal, goal, np.ones(count))
+    metrics = agent.episode_metrics(episodes)
+    assert metrics["subgoal_from_start"] == pytest.approx(1.0)  # positions
+    assert metrics["subgoal_angle_from_start"] == pytest.approx(45.0, abs=1e-3)
+    assert metrics["subgoal_angle_from_goal"] == pytest.approx(45.0, abs=1e-3)
+    assert metrics["subgoal_progress"] == pytest.approx(0.5, abs=1e-5)
+    assert metrics["subgoal_off_line"] == pytest.approx(0.0, abs=1e-3)
+    plan = agent.plan(episodes)[0]
+    assert plan["angles"]["start_to_subgoal"] == [45.0, 90.0]  # the last segment's is the goal
+    assert plan["angles"]["subgoal_to_goal"][0] == 45.0 and plan["angles"]["final_to_goal"] == 0.0
+    assert plan["reached"] == [False, True]
+    assert agent.placement_by_distance(episodes)[0]["goal_angle"] == [90.0, 90.0]  # degrees
