@@ -95,7 +95,10 @@ def write_report(
         picture = _image(figures[0], run.root, "eval success against epochs and env steps")
         sections.append(_section("Training", picture))
 
-    if config.algo is Algo.dtd:
+    spec = json.loads(run.config.read_text()).get("derived", {}).get("spec", {})
+    if config.algo is Algo.dtd and spec.get("quaternion"):
+        sections.append(_section("The high level's values", _NO_MAP_FOR_ROTATIONS))
+    elif config.algo is Algo.dtd:
         sections.append(_heatmap_section(run, checkpoint, resolution, assets))
 
     rendered = render_run(run.root, episodes, assets_dir / "episodes", checkpoint, seed)
@@ -152,6 +155,16 @@ def _settings(config: Any) -> str:
     return _section("Configuration", f"<div class='settings'><table>{rows}</table></div>")
 
 
+_NO_MAP_FOR_ROTATIONS = (
+    "<p>No heatmap: this task's goal is the block's orientation (a unit quaternion, beside a "
+    "position the rotation-only variants ignore), and the high level's sub-goals are orientations "
+    "too, so a map of its values over the table has nothing to show. What the high level asks for "
+    "is in the plans below: each sub-goal's turn from the start, how far from it the segment "
+    "ended, and its angle to the goal; the key frames show the sub-goal as a green ghost block "
+    "beside the goal's.</p>"
+)
+
+
 def _heatmap_section(run: RunDir, checkpoint: str, resolution: int, assets: list[Path]) -> str:
     from dtd.errors import EnvError
     from dtd.explain.heatmap import run_heatmaps
@@ -185,8 +198,19 @@ def _plans_table(plans: list[dict[str, Any]]) -> str:
     head += "<th>final</th><th>outcome</th></tr>"
     rows = []
     for number, plan in enumerate(plans, start=1):
+        angles = plan.get("angles")
+
+        def turns(n: int, angles: dict[str, Any] | None = angles) -> str:
+            if not angles:
+                return ""
+            return (
+                f"; turned {angles['start_to_subgoal'][n]:.0f}&deg; from the start, "
+                f"{angles['subgoal_to_goal'][n]:.0f}&deg; from the goal, "
+                f"ended {angles['segment_end_to_subgoal'][n]:.0f}&deg; from it"
+            )
+
         steps = "<br>".join(
-            f"{n + 1}: {point(subgoal)} {'reached' if reached else 'missed'} ({point(end)})"
+            f"{n + 1}: {point(subgoal)} {'reached' if reached else 'missed'} ({point(end)}){turns(n)}"
             for n, (subgoal, end, reached) in enumerate(
                 zip(plan["subgoals"], plan["segment_ends"], plan["reached"], strict=True)
             )

@@ -147,3 +147,8 @@ def test_a_hand_run_places_poses_and_reports_their_angles(tmp_path):
         assert np.all(subgoals <= np.array(spec.goal_high) + 1e-6)
         start_to_subgoal = np.degrees(angle_between(np.array(plan["start"])[3:], subgoals[:, 3:]))
         assert np.allclose(plan["angles"]["start_to_subgoal"], start_to_subgoal, atol=0.06)
+    result = dtd("report", run_dir, "--episodes", "1")
+    assert result.returncode == 0, result.stderr
+    page = (run_dir / "report.html").read_text()
+    assert "No heatmap: this task's goal is the block's orientation" in page
+    assert "&deg; from the start" in page
