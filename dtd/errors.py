@@ -24,3 +24,8 @@ class CheckpointError(DtdError):
 class MachineError(Exception):
     """A failure of the machine rather than of the input (a full disk, an I/O error), reported
     as one line with the operating system's reason; the command line exits 1."""
+
+
+class WorkerLost(MachineError):
+    """A data-parallel worker lost contact with the others of its run (one of them died, or
+    was cut off): the job stops, and the run resumes from its last finished epoch."""

@@ -9,6 +9,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from dtd.agents.collective import ALONE, Collective
 from dtd.agents.networks import ActionHead, Actor, Critic, xavier_initialise
 from dtd.agents.normalizer import RunningNormalizer
 from dtd.agents.records import Batch
@@ -20,7 +21,9 @@ class DDPGLearner:
 
     The ``head`` decides what an action is: a motor command (the low level) or a sub-goal
     (the high level). Learns from batches it is given; acting with exploration, collecting
-    and relabelling are the caller's concern.
+    and relabelling are the caller's concern. With fellow data-parallel workers
+    (``collective``), each update's gradients and the normalisers' statistics are theirs
+    combined, so every worker's parameters stay the same.
     """
 
     def __init__(
@@ -31,13 +34,15 @@ class DDPGLearner:
         head: ActionHead,
         config: LearnerConfig,
         gamma: float,
+        collective: Collective = ALONE,
     ) -> None:
         self.config = config
+        self.collective = collective
         self.gamma = gamma
         # A -1/0 reward per step bounds the return to [-1/(1-gamma), 0].
         self.return_bounds = (-1.0 / (1.0 - gamma), 0.0) if config.clip_return else (-np.inf, np.inf)
-        self.obs_norm = RunningNormalizer(obs_dim, config.norm_eps, config.norm_clip)
-        self.goal_norm = RunningNormalizer(goal_dim, config.norm_eps, config.norm_clip)
+        self.obs_norm = RunningNormalizer(obs_dim, config.norm_eps, config.norm_clip, collective)
+        self.goal_norm = RunningNormalizer(goal_dim, config.norm_eps, config.norm_clip, collective)
         input_dim = obs_dim + goal_dim
         self.head = head
         self.actor = Actor(input_dim, action_dim, config.hidden_sizes, config.layer_norm)
@@ -52,6 +57,7 @@ class DDPGLearner:
         self.actor_optim = torch.optim.Adam(self.actor.parameters(), lr=config.actor_lr, fused=True)
         self.critic_optim = torch.optim.Adam(self.critic.parameters(), lr=config.critic_lr, fused=True)
         self._actor_params = list(self.actor.parameters())
+        self._critic_params = list(self.critic.parameters())
         # What update() runs: the networks themselves, or compiled views of them (compile()).
         self._train_nets: dict[str, nn.Module] = {
             "actor": self.actor,
@@ -130,6 +136,7 @@ class DDPGLearner:
         critic_loss = torch.mean(torch.square(q - target))
         self.critic_optim.zero_grad(set_to_none=True)
         critic_loss.backward()
+        self.collective.average_gradients(self._critic_params)
         if self.config.actor_after_critic:
             self.critic_optim.step()
         actor_loss = self._actor_step(nets, inputs, obs, batch.actor_rows)
@@ -155,6 +162,13 @@ class DDPGLearner:
         if rows is not None:
             chosen = torch.as_tensor(rows)
             if not bool(chosen.any()):
+                if self.collective.workers == 1:
+                    return torch.zeros(())
+                # The others step with their gradients: this worker adds zeros to the mean.
+                for param in self._actor_params:
+                    param.grad = torch.zeros_like(param)
+                self.collective.average_gradients(self._actor_params)
+                self.actor_optim.step()
                 return torch.zeros(())
             inputs, obs = inputs[chosen], obs[chosen]
         policy_action, unit = self._policy(nets["actor"], inputs, obs)
@@ -167,6 +181,7 @@ class DDPGLearner:
         grads = torch.autograd.grad(actor_loss, self._actor_params)
         for param, grad in zip(self._actor_params, grads, strict=True):
             param.grad = grad
+        self.collective.average_gradients(self._actor_params)
         self.actor_optim.step()
         return actor_loss
 

@@ -5,16 +5,22 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from dtd.agents.collective import ALONE, Collective
+
 
 class RunningNormalizer:
     """Normalises vectors by the mean and std of everything it has been shown.
 
     Statistics are kept in float64 sums so that long runs do not drift; the float32
-    tensors used by the networks are refreshed after every :meth:`update`.
+    tensors used by the networks are refreshed after every :meth:`update`. With fellow
+    workers (``collective``), every update adds what all of them were shown.
     """
 
-    def __init__(self, size: int, eps: float = 0.01, clip: float = 5.0) -> None:
+    def __init__(
+        self, size: int, eps: float = 0.01, clip: float = 5.0, collective: Collective = ALONE
+    ) -> None:
         self.size = size
+        self.collective = collective
         self.eps = eps
         self.clip = clip
         self.sum = np.zeros(size, dtype=np.float64)
@@ -26,9 +32,16 @@ class RunningNormalizer:
     def update(self, values: np.ndarray) -> None:
         """Add a batch of vectors (any leading shape, last dimension ``size``)."""
         flat = np.asarray(values, dtype=np.float64).reshape(-1, self.size)
-        self.sum += flat.sum(axis=0)
-        self.sum_sq += np.square(flat).sum(axis=0)
-        self.count += flat.shape[0]
+        if self.collective.workers == 1:
+            self.sum += flat.sum(axis=0)
+            self.sum_sq += np.square(flat).sum(axis=0)
+            self.count += flat.shape[0]
+        else:
+            added = np.concatenate([flat.sum(axis=0), np.square(flat).sum(axis=0), [flat.shape[0]]])
+            added = self.collective.sum(added)
+            self.sum += added[: self.size]
+            self.sum_sq += added[self.size : 2 * self.size]
+            self.count += int(added[-1])
         self._refresh()
 
     def _refresh(self) -> None:

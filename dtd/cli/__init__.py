@@ -12,7 +12,8 @@ from dtd.cli.explaining import evaluate, heatmap, render, report
 from dtd.cli.options import REQUIRED_ENV_UNLESS_RESUMED, deferred, options_class, parse_command
 from dtd.cli.training import plot, sweep, train
 from dtd.config import Preset, preset_config
-from dtd.errors import DtdError, MachineError
+from dtd.errors import DtdError, MachineError, WorkerLost
+from dtd.training.launch import INTERRUPTED_EXIT, LOST_WORKER_EXIT, reports_for_itself
 
 DESCRIPTION = "Dot-to-Dot: train and explain goal-conditioned agents (DDPG, HER, DtD)."
 
@@ -38,7 +39,7 @@ def main(argv: list[str] | None = None) -> None:
     preset = preset_config(preset_named(args))
     commands = {
         "train": deferred(train, options_class(preset, hints=REQUIRED_ENV_UNLESS_RESUMED)),
-        "sweep": deferred(sweep, options_class(preset, omit=frozenset({"algo"}))),
+        "sweep": deferred(sweep, options_class(preset, omit=frozenset({"algo", "workers"}))),
         "plot": deferred(plot),
         "eval": deferred(evaluate),
         "render": deferred(render),
@@ -53,15 +54,22 @@ def main(argv: list[str] | None = None) -> None:
     except DtdError as exc:
         print(f"dtd: error: {exc}", file=sys.stderr)
         sys.exit(2)
+    except WorkerLost as exc:
+        # A worker dtd started here leaves the report to its launcher, which knows who died.
+        if not reports_for_itself():
+            sys.exit(LOST_WORKER_EXIT)
+        print(f"dtd: error: {exc}{_how_to_continue(args, exc)}", file=sys.stderr)
+        sys.exit(1)
     except MachineError as exc:
         print(f"dtd: error: {exc}", file=sys.stderr)
         sys.exit(1)
     except KeyboardInterrupt as exc:
-        print(f"dtd: interrupted{_how_to_continue(args, exc)}", file=sys.stderr)
-        sys.exit(130)
+        if reports_for_itself():
+            print(f"dtd: interrupted{_how_to_continue(args, exc)}", file=sys.stderr)
+        sys.exit(INTERRUPTED_EXIT)
 
 
-def _how_to_continue(args: list[str], interrupt: KeyboardInterrupt) -> str:
+def _how_to_continue(args: list[str], interrupt: BaseException) -> str:
     run_dir = getattr(interrupt, "run_dir", None)
     if run_dir is not None:
         return f"; continue with dtd train --resume {run_dir}"

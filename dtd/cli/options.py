@@ -181,11 +181,20 @@ def as_declared(hint: Any, default: Any) -> Any:
     return annotated[0] if len(members) == 2 and len(annotated) == 1 and type(None) in members else hint
 
 
+_INVOCATION: list[str] = []
+
+
+def invocation() -> list[str]:
+    """The arguments of the running ``dtd`` command (what its workers are started with)."""
+    return list(_INVOCATION)
+
+
 def parse_command(commands: dict[str, Callable[..., Command]], description: str, args: list[str]) -> Command:
     """The command ``args`` name, parsed; ``--help`` prints and exits 0, a parse error is a
     :class:`DtdError` of one line."""
     if args and not args[0].startswith("-") and args[0] not in commands:
         raise DtdError(f"unknown command {args[0]!r}; the commands are {', '.join(commands)}")
+    _INVOCATION[:] = args
     errors = io.StringIO()
     try:
         with contextlib.redirect_stderr(errors):

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import signal
 import sys
 import warnings
 from pathlib import Path
@@ -21,13 +23,19 @@ def train(
     resume: Annotated[Path | None, optional("DIR", "a new run")] = None,
     force: bool = False,
     progress: bool = True,
+    oversubscribe: bool = False,
 ) -> None:
     """Train an agent; results land in the run directory.
+
+    With --workers N, N data-parallel workers (torch.distributed, gloo) train one agent: dtd
+    starts them on this machine, or torchrun starts them on several (the run directory then
+    on a filesystem every machine shares).
 
     Examples:
       dtd train --env FetchPush-v4 --algo her --seed 0 --epochs 50 --run-dir runs/push-her-0
       dtd train --env FetchPush-v4 --algo dtd --preset paper   # the paper's settings
       dtd train --resume runs/push-her-0
+      dtd train --env FetchPush-v4 --algo dtd --preset paper --workers 19 --oversubscribe
 
     Args:
         config: The run's settings.
@@ -35,12 +43,23 @@ def train(
         resume: Continue the run in this directory after its last finished epoch; --epochs may grow.
         force: Replace a run that already exists in --run-dir.
         progress: Show a live progress bar.
+        oversubscribe: Start more workers than this machine has cores (each then runs slower).
     """
+    from dtd.training.launch import launched_workers
+
+    if launched_workers() is None:
+        workers = _workers_of(config, resume)
+        if workers > 1:
+            _launch_workers(config, run_dir, resume, force, workers, oversubscribe)
+            return
+    from dtd.training.launch import reports_for_itself
     from dtd.training.lifecycle import epochs_recorded
     from dtd.training.lifecycle import train as train_run
 
     before = epochs_recorded(resume) if resume is not None else 0
     state = train_run(config, run_dir=run_dir, resume=resume, force=force, show_progress=progress)
+    if not reports_for_itself() and os.environ.get("RANK", "0") != "0":
+        return  # worker 0 reports for the job
     if resume is not None and state.epoch <= before:
         print(
             f"dtd: {resume} has already trained {state.epoch} epochs; nothing to do "
@@ -59,6 +78,56 @@ def train(
             }
         )
     )
+
+
+def _workers_of(config: TrainConfig, resume: Path | None) -> int:
+    """The workers of the run to start (--workers) or to resume (as it was started)."""
+    if resume is None:
+        return config.workers
+    from dtd.training.run_dir import RunDir, read_config
+
+    return read_config(RunDir(resume)).workers
+
+
+def _launch_workers(
+    config: TrainConfig,
+    run_dir: Path | None,
+    resume: Path | None,
+    force: bool,
+    workers: int,
+    oversubscribe: bool,
+) -> None:
+    """Check the run, start its workers here, and report how the job ended in one line."""
+    from dtd.cli.options import invocation
+    from dtd.errors import ConfigError, MachineError
+    from dtd.training.components import usable_cores
+    from dtd.training.launch import INTERRUPTED_EXIT, LOST_WORKER_EXIT, launch_local
+    from dtd.training.lifecycle import checked_start
+
+    _, run = checked_start(config, run_dir, resume, force)
+    cores = usable_cores()
+    if workers > cores and not oversubscribe:
+        raise ConfigError(
+            f"--workers {workers} is more than the {cores} cores this process may use; "
+            "--oversubscribe starts them anyway (each then runs slower)"
+        )
+    # The cores are shared out: each worker's torch threads (where --threads leaves it open).
+    threads = max(1, cores // workers)
+    try:
+        ends = launch_local(invocation(), workers, threads)
+    except KeyboardInterrupt as interrupt:
+        interrupt.run_dir = run.root  # type: ignore[attr-defined]
+        raise
+    first = ends[0]
+    if first.returncode == 0:
+        return
+    how = f"continue from its last finished epoch with dtd train --resume {run.root}"
+    if first.returncode == INTERRUPTED_EXIT or first.returncode == -signal.SIGINT:
+        print(f"dtd: interrupted; {how}", file=sys.stderr)
+        sys.exit(INTERRUPTED_EXIT)
+    if first.returncode < 0 or first.returncode == LOST_WORKER_EXIT:
+        raise MachineError(f"{first.describe()}; the job stopped: {how}")
+    sys.exit(first.returncode)  # the worker said why
 
 
 def sweep(

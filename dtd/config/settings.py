@@ -185,6 +185,10 @@ class TrainConfig:
     collect_ahead: bool = True
     """Collect a cycle's episodes while the previous cycle's updates run, with the policy from
     before them (off: after them, as OpenAI baselines' HER; slower with a collecting process)."""
+    workers: int = 1
+    """Data-parallel workers (torch.distributed): each collects its own episodes into its own
+    replay; every update's gradients are averaged over all and the input statistics summed.
+    An epoch is n_cycles cycles on every worker."""
     learner: tyro.conf.OmitArgPrefixes[LearnerConfig] = LOW_LEVEL_DEFAULTS
     """Settings of the DDPG learner (of the low level, for dtd)."""
     segments: int = 2

@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from dtd.agents.buffer import EpisodeBuffer
+from dtd.agents.collective import ALONE, Collective
 from dtd.agents.ddpg import DDPGLearner
 from dtd.agents.dot_to_dot import DotToDotAgent, HandOverSchedule, SubgoalExploration
 from dtd.agents.exploration import ActionNoise
@@ -26,6 +27,7 @@ from dtd.envs.make import make_envs
 from dtd.envs.spec import EnvSpec, reward_function
 from dtd.errors import ConfigError
 from dtd.training.collector import Collector, InlineCollector, ProcessCollector
+from dtd.training.launch import local_workers
 
 
 @dataclasses.dataclass
@@ -41,12 +43,19 @@ class Components:
     """Replay sampling (and anything else the learner draws)."""
 
 
-def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env) -> Agent:
-    """The agent ``config.algo`` names, with fresh networks and an empty replay."""
+def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Collective = ALONE) -> Agent:
+    """The agent ``config.algo`` names, with fresh networks and an empty replay; its learners
+    combine their updates with fellow workers through ``collective``."""
     config = with_algorithm_defaults(config)
     gamma = config.learner.gamma if config.learner.gamma is not None else spec.default_gamma()
     low = DDPGLearner(
-        spec.obs_dim, spec.goal_dim, spec.action_dim, BoxActionHead(spec.action_max), config.learner, gamma
+        spec.obs_dim,
+        spec.goal_dim,
+        spec.action_dim,
+        BoxActionHead(spec.action_max),
+        config.learner,
+        gamma,
+        collective,
     )
     buffer = EpisodeBuffer.for_transitions(
         config.buffer_size, spec.horizon, spec.obs_dim, spec.goal_dim, spec.action_dim
@@ -70,7 +79,7 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env) -> Agent:
         raise ConfigError(f"--high-target observed needs a high-level discount below 1, got {high_gamma}")
     head = SubgoalHead(config.subgoal_max_distance, spec.goal_low, spec.goal_high, spec.quaternion)
     high = DDPGLearner(
-        spec.obs_dim + spec.goal_dim, spec.goal_dim, spec.goal_dim, head, config.high, high_gamma
+        spec.obs_dim + spec.goal_dim, spec.goal_dim, spec.goal_dim, head, config.high, high_gamma, collective
     )
     schedule = HandOverSchedule(
         config.subgoal_eps_start,
@@ -106,12 +115,17 @@ def build(
     eval_seed: int | None = None,
     eval_envs: int | None = None,
     collection: Collection | None = None,
+    worker: int = 0,
+    collective: Collective = ALONE,
 ) -> Components:
     """Environments, agent, collector and random generators for ``config``, all seeded from
     ``config.seed``.
 
     ``eval_seed`` seeds the evaluation environments apart from training (``dtd eval``);
-    ``collection`` overrides ``config.collector``.
+    ``collection`` overrides ``config.collector``. Data-parallel ``worker`` k > 0 of a run
+    seeds its environments, exploration and replay sampling apart from worker 0 (whose
+    seeds are a run of its own's) and combines its updates through ``collective``; the
+    networks start the same on every worker.
     """
     config.validate()
     assert config.env is not None
@@ -119,7 +133,8 @@ def build(
     threads = resolved_threads(config.threads)
     torch.set_num_threads(threads)
     torch.manual_seed(config.seed)
-    train_seq, eval_seq, rng_seq, explore_seq = np.random.SeedSequence(config.seed).spawn(4)
+    seeds = np.random.SeedSequence(config.seed if worker == 0 else [config.seed, worker])
+    train_seq, eval_seq, rng_seq, explore_seq = seeds.spawn(4)
     if eval_seed is not None:
         eval_seq = np.random.SeedSequence([eval_seed, 1])
     n_eval = eval_envs or min(config.test_episodes, config.episodes_per_cycle)
@@ -129,7 +144,7 @@ def build(
         raise ConfigError(
             f"--buffer-size must hold one episode ({spec.horizon} steps), got {config.buffer_size}"
         )
-    agent = build_agent(config, spec, evaluation[0])
+    agent = build_agent(config, spec, evaluation[0], collective)
     exploring_side = functools.partial(_exploring_side, config, train_seq, explore_seq)
     try:
         if resolved_collection(collection, threads) is Collection.process:
@@ -145,11 +160,11 @@ def build(
 
 def resolved_collection(collection: Collection, threads: int) -> Collection:
     """``auto`` made concrete for a learner of ``threads`` torch threads: a collecting process
-    where a core is left for it, else inline (a process beside threads on every core would
-    only take turns with them)."""
+    where a core of this worker's share of the machine is left for it, else inline (a process
+    beside threads on every core would only take turns with them)."""
     if collection is not Collection.auto:
         return collection
-    return Collection.process if usable_cores() > threads else Collection.inline
+    return Collection.process if usable_cores() // local_workers() > threads else Collection.inline
 
 
 def resolved_threads(threads: int) -> int:

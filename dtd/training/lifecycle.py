@@ -3,6 +3,7 @@ env-step budget."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 from pathlib import Path
@@ -11,15 +12,17 @@ from typing import Any
 from dtd.config import Preset, TrainConfig, flat_items, preset_config, with_algorithm_defaults
 from dtd.envs.make import make_envs
 from dtd.envs.spec import EnvSpec
-from dtd.errors import CheckpointError, ConfigError, RunDirError
+from dtd.errors import CheckpointError, ConfigError, RunDirError, WorkerLost
 from dtd.training.atomic import remove_stale_temporaries
 from dtd.training.checkpoint import FORMAT_VERSION, check_checkpoint, load_checkpoint, restoring
 from dtd.training.components import Components, build, close_all, resolved_threads
+from dtd.training.launch import launched_workers
 from dtd.training.progress import TrainingProgress
 from dtd.training.recorder import MetricsRecorder
 from dtd.training.run_dir import RunDir, read_config, write_config
 from dtd.training.run_lock import holding
 from dtd.training.trainer import Trainer, TrainState, restore
+from dtd.training.workers import SOLO, WorkerGroup, join_group, leave_group
 
 # Settings that may change when a run is resumed; any other must stay as the run began.
 RESUMABLE_SETTINGS = frozenset({"epochs", "threads", "collector"})
@@ -71,47 +74,79 @@ def train(
 
     The run directory is held by this process while it trains (a second trainer is refused,
     :mod:`dtd.training.run_lock`); that it can be written is known before anything is built.
+    In a job of data-parallel workers (started by torchrun or ``dtd train --workers N``: the
+    environment names this process's rank), this process is one of them.
     """
+    config, run = checked_start(config, run_dir, resume, force)
+    world = launched_workers()
+    if world is not None and resume is None and config.workers == 1:
+        config = dataclasses.replace(config, workers=world)  # torchrun without --workers
+    workers = config.workers if resume is None else resumed_config(read_config(run), config).workers
+    if world is None and workers > 1:
+        raise ConfigError(
+            f"a run of {workers} workers is started by dtd train --workers {workers} or by torchrun"
+        )
+    group = join_group(workers) if world is not None else SOLO
+    try:
+        # Every worker has looked at the run directory before any of them writes to it.
+        group.barrier()
+        with holding(run.root) if group.writes else contextlib.nullcontext():
+            if resume is not None:
+                config, components, state = _resumed(run, config, group)
+                if components is None:
+                    return state  # trained to its end already: nothing is built or written
+            else:
+                components, state = (
+                    build(config, worker=group.rank, collective=group.collective),
+                    TrainState(),
+                )
+                if force and group.writes:
+                    run.clear()
+            return _train_started(run, config, components, state, show_progress, group)
+    except (KeyboardInterrupt, WorkerLost) as stop:
+        stop.run_dir = run.root  # type: ignore[union-attr]  # how to continue, for the CLI
+        raise
+    finally:
+        if group.workers > 1:
+            leave_group()
+
+
+def checked_start(
+    config: TrainConfig, run_dir: Path | str | None, resume: Path | str | None, force: bool
+) -> tuple[TrainConfig, RunDir]:
+    """What :func:`train` would start or resume, checked before anything is built: the
+    configuration (for a new run, with its thread count, batch and n-step made concrete) and
+    the run directory; a :class:`ConfigError` or :class:`RunDirError` where it cannot."""
     if resume is not None:
         if run_dir is not None and Path(run_dir).resolve() != Path(resume).resolve():
             raise ConfigError("give the run directory once: --resume DIR (without --run-dir)")
         run = RunDir(Path(resume))
-        read_config(run)  # a missing or unreadable run is refused before anything is written
-    else:
-        config.validate()
-        # The thread count is part of what makes a run repeatable: the run records it, and the
-        # batch and n-step its algorithm chose.
-        config = dataclasses.replace(config, threads=resolved_threads(config.threads))
-        config = with_algorithm_defaults(config)
-        run = RunDir(Path(run_dir) if run_dir is not None else default_run_dir(config))
-        if run.holds_run() and not force:
-            raise RunDirError(
-                f"{run.root} already holds a run; continue it with --resume {run.root} "
-                "or replace it with --force"
-            )
-    try:
-        with holding(run.root):
-            if resume is not None:
-                config, components, state = _resumed(run, config)
-                if components is None:
-                    return state  # trained to its end already: nothing is built or written
-            else:
-                components, state = build(config), TrainState()
-                if force:
-                    run.clear()
-            return _train_started(run, config, components, state, show_progress)
-    except KeyboardInterrupt as interrupt:
-        interrupt.run_dir = run.root  # type: ignore[attr-defined]  # how to continue, for the CLI
-        raise
+        resumed_config(read_config(run), config)  # a missing or unreadable run is refused here
+        return config, run
+    config.validate()
+    # The thread count is part of what makes a run repeatable: the run records it, and the
+    # batch and n-step its algorithm chose.
+    config = dataclasses.replace(config, threads=resolved_threads(config.threads))
+    config = with_algorithm_defaults(config)
+    run = RunDir(Path(run_dir) if run_dir is not None else default_run_dir(config))
+    if run.holds_run() and not force:
+        raise RunDirError(
+            f"{run.root} already holds a run; continue it with --resume {run.root} or replace it with --force"
+        )
+    return config, run
 
 
-def _resumed(run: RunDir, given: TrainConfig) -> tuple[TrainConfig, Components | None, TrainState]:
+def _resumed(
+    run: RunDir, given: TrainConfig, group: WorkerGroup = SOLO
+) -> tuple[TrainConfig, Components | None, TrainState]:
     """A stopped run's configuration (with the settings ``given`` may change), components and
-    counters, restored from its last checkpoint; no components when the run has already
-    trained ``config.epochs`` epochs."""
+    counters, restored from its last checkpoint (a data-parallel worker k > 0: from its shard
+    of the epoch that checkpoint holds); no components when the run has already trained
+    ``config.epochs`` epochs."""
     config = resumed_config(read_config(run), given)
     config.validate()
-    remove_stale_temporaries(run.root)  # half-written files of the process that was killed
+    if group.writes:
+        remove_stale_temporaries(run.root)  # half-written files of the process that was killed
     # A run killed during its first epoch has no checkpoint yet: it starts again.
     snapshot = load_checkpoint(run.latest) if run.latest.exists() else None
     if snapshot is not None:
@@ -119,18 +154,22 @@ def _resumed(run: RunDir, given: TrainConfig) -> tuple[TrainConfig, Components |
             trained = TrainState(**snapshot["state"])
         if trained.epoch >= config.epochs:
             return config, None, trained
-    components = build(config)
+    components = build(config, worker=group.rank, collective=group.collective)
     if snapshot is None:
         return config, components, TrainState()
+    path = run.latest
+    if not group.writes:
+        path = run.worker_shard(group.rank, trained.epoch)
+        snapshot = load_checkpoint(path)
     try:
-        check_checkpoint(snapshot, config, components.spec, run.latest)
+        check_checkpoint(snapshot, config, components.spec, path)
         if snapshot["format_version"] != FORMAT_VERSION:
             raise CheckpointError(
-                f"checkpoint {run.latest} was written by an older dtd (format "
+                f"checkpoint {path} was written by an older dtd (format "
                 f"{snapshot['format_version']}); it can be evaluated but not resumed"
             )
         state = restore(
-            snapshot, components.agent, components.rng, components.collector, components.eval_envs, run.latest
+            snapshot, components.agent, components.rng, components.collector, components.eval_envs, path
         )
     except CheckpointError:
         close_all(components)
@@ -139,15 +178,25 @@ def _resumed(run: RunDir, given: TrainConfig) -> tuple[TrainConfig, Components |
 
 
 def _train_started(
-    run: RunDir, config: TrainConfig, components: Components, state: TrainState, show_progress: bool
+    run: RunDir,
+    config: TrainConfig,
+    components: Components,
+    state: TrainState,
+    show_progress: bool,
+    group: WorkerGroup = SOLO,
 ) -> TrainState:
-    """Record the configuration, then train from ``state`` to ``config.epochs``."""
-    write_config(run, config, {"spec": dataclasses.asdict(components.spec)})
-    # TensorBoard events past the checkpoint came from an epoch that did not finish.
-    recorder = MetricsRecorder(run, resume_step=state.env_steps + 1 if state.epoch else 0)
-    total_steps = config.epochs * config.n_cycles * config.episodes_per_cycle * components.spec.horizon
+    """Record the configuration, then train from ``state`` to ``config.epochs`` (worker 0 of
+    data-parallel workers records and shows progress; the others only train)."""
+    recorder = None
+    if group.writes:
+        write_config(run, config, {"spec": dataclasses.asdict(components.spec)})
+        # TensorBoard events past the checkpoint came from an epoch that did not finish.
+        recorder = MetricsRecorder(run, resume_step=state.env_steps + 1 if state.epoch else 0)
+    total_steps = (
+        config.epochs * config.n_cycles * config.episodes_per_cycle * components.spec.horizon * group.workers
+    )
     try:
-        with TrainingProgress(total_steps, config.epochs, enabled=show_progress) as progress:
+        with TrainingProgress(total_steps, config.epochs, enabled=show_progress and group.writes) as progress:
             trainer = Trainer(
                 config,
                 components.spec,
@@ -158,13 +207,16 @@ def _train_started(
                 run,
                 recorder,
                 progress,
+                group,
             )
             # metrics.csv is rebuilt from the checkpoint: rows of an unfinished epoch vanish.
-            recorder.write_csv(state.history)
+            if recorder is not None:
+                recorder.write_csv(state.history)
             progress.start_at(state.env_steps)
             return trainer.train(state)
     finally:
-        recorder.close()
+        if recorder is not None:
+            recorder.close()
         close_all(components)
 
 

@@ -6,6 +6,8 @@ tensorboard/           TensorBoard event files with the same figures
 checkpoints/latest.pt  everything needed to resume, after the last finished epoch
 checkpoints/best.pt    the agent with the best evaluation success (no replay)
 checkpoints/first.pt   the agent after the first epoch (no replay), to compare with the last
+checkpoints/workers/   with data-parallel workers: worker k's replay and random state after
+                       epoch E (worker-k-epoch-E.pt); latest.pt is worker 0's
 """
 
 from __future__ import annotations
@@ -61,6 +63,17 @@ class RunDir:
     @property
     def first(self) -> Path:
         return self.checkpoints / "first.pt"
+
+    def worker_shard(self, worker: int, epoch: int) -> Path:
+        """Where data-parallel worker ``worker`` (> 0) keeps its state after ``epoch``."""
+        return self.checkpoints / "workers" / f"worker-{worker}-epoch-{epoch}.pt"
+
+    def remove_worker_shards(self, worker: int, keep_epoch: int) -> None:
+        """Remove worker ``worker``'s shards of every epoch but ``keep_epoch``."""
+        keep = self.worker_shard(worker, keep_epoch)
+        for path in self.worker_shard(worker, 0).parent.glob(f"worker-{worker}-epoch-*.pt"):
+            if path != keep:
+                path.unlink(missing_ok=True)
 
     def holds_run(self) -> bool:
         """Whether a run has already started here."""

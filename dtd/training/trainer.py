@@ -24,6 +24,7 @@ from dtd.training.progress import TrainingProgress
 from dtd.training.recorder import MetricsRecorder, Row
 from dtd.training.rollout import concatenate, episode_figures, run_many
 from dtd.training.run_dir import RunDir
+from dtd.training.workers import SOLO, WorkerGroup
 
 
 @dataclasses.dataclass
@@ -41,7 +42,12 @@ class TrainState:
 
 
 class Trainer:
-    """Runs epochs from a :class:`TrainState` to ``config.epochs``."""
+    """Runs epochs from a :class:`TrainState` to ``config.epochs``.
+
+    As one of several data-parallel workers (``group``), it counts the env steps and episodes
+    of all, reports figures averaged over all, and writes its own checkpoint shard; worker 0
+    writes the run's files.
+    """
 
     def __init__(
         self,
@@ -52,8 +58,9 @@ class Trainer:
         eval_envs: Sequence[gym.Env],
         rng: np.random.Generator,
         run: RunDir,
-        recorder: MetricsRecorder,
+        recorder: MetricsRecorder | None,
         progress: TrainingProgress,
+        group: WorkerGroup = SOLO,
     ) -> None:
         self.config = config
         self.spec = spec
@@ -63,7 +70,9 @@ class Trainer:
         self.rng = rng
         self.run = run
         self.recorder = recorder
+        """Writes metrics.csv and TensorBoard (worker 0's; None on the others)."""
         self.progress = progress
+        self.group = group
 
     def train(self, state: TrainState) -> TrainState:
         """Train until ``config.epochs`` epochs are finished; checkpoint after each one."""
@@ -71,9 +80,11 @@ class Trainer:
             row = self._epoch(state, epoch)
             state.history.append(row)
             self._save(state, improved=row["eval_success"] > state.best_eval_success)
-            self.recorder.write_csv(state.history)
-            self.recorder.log(row)
-            self.progress.epoch_done(row)
+            if self.recorder is not None:
+                self.recorder.write_csv(state.history)
+                self.recorder.log(row)
+            if self.group.writes:
+                self.progress.epoch_done(row)
         return state
 
     def _epoch(self, state: TrainState, epoch: int) -> Row:
@@ -95,12 +106,19 @@ class Trainer:
             if cycle < config.n_cycles and not config.collect_ahead:
                 self.collector.submit()
             collected.append(episodes)
-            steps = episodes.count * self.spec.horizon
+            steps = episodes.count * self.spec.horizon * self.group.workers
             state.env_steps += steps
-            state.episodes += episodes.count
+            state.episodes += episodes.count * self.group.workers
             state.updates += config.updates_per_cycle
             self.progress.advance(steps, epoch, steps * cycle / (time.perf_counter() - start))
         evaluation = run_many(self.eval_envs, self.agent, self.spec, config.test_episodes, False, self.rng)
+        figures = self.group.mean(
+            {
+                **_prefixed("eval_", episode_figures(self.agent, evaluation)),
+                **_prefixed("train_", episode_figures(self.agent, concatenate(collected))),
+                **{name: total / config.n_cycles for name, total in sums.items()},
+            }
+        )
         state.wall_s += time.perf_counter() - start
         state.epoch = epoch
         return {
@@ -109,12 +127,25 @@ class Trainer:
             "updates": state.updates,
             "episodes": state.episodes,
             "wall_s": round(state.wall_s, 3),
-            **_prefixed("eval_", episode_figures(self.agent, evaluation)),
-            **_prefixed("train_", episode_figures(self.agent, concatenate(collected))),
-            **{name: total / config.n_cycles for name, total in sums.items()},
+            **figures,
         }
 
     def _save(self, state: TrainState, improved: bool) -> None:
+        if self.group.workers == 1:
+            self._save_run(state, improved)
+            return
+        # Each worker's shard of the epoch first, then worker 0's checkpoint, which names the
+        # epoch: a crash at any moment leaves a complete set for the epoch latest.pt holds.
+        if not self.group.writes:
+            save_atomic(self.run.worker_shard(self.group.rank, state.epoch), self.snapshot(state, True))
+        self.group.barrier()
+        if self.group.writes:
+            self._save_run(state, improved)
+        self.group.barrier()
+        if not self.group.writes:
+            self.run.remove_worker_shards(self.group.rank, keep_epoch=state.epoch)
+
+    def _save_run(self, state: TrainState, improved: bool) -> None:
         if improved:
             state.best_eval_success = state.history[-1]["eval_success"]
             save_atomic(self.run.best, self.snapshot(state, include_replay=False))
@@ -130,6 +161,7 @@ class Trainer:
             "spec": dataclasses.asdict(self.spec),
             "config": self.config.to_dict(),
             "state": dataclasses.asdict(state),
+            "worker": self.group.rank,
             "agent": self.agent.state_dict(include_replay=include_replay),
             "rng": {
                 "numpy": self.rng.bit_generator.state,

@@ -1,0 +1,147 @@
+"""Data-parallel workers on torch.distributed: the same parameters on every worker, one worker
+as a run of its own, a killed worker, resume, and bad input (2 workers of 1 thread each)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import torch
+
+from tests.helpers import TINY, dtd, read_metrics, without_times
+
+pytestmark = pytest.mark.smoke
+
+DATA = Path(__file__).parents[2] / "data" / "before-workers"
+
+
+def children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid``, oldest first."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except (FileNotFoundError, ProcessLookupError):
+            continue
+        if int(fields[1]) == pid:
+            found.append((int(fields[19]), int(stat.parent.name)))  # start time, pid
+    return [child for _, child in sorted(found)]
+
+
+def tensors_differing(first: object, second: object, path: str = "") -> list[str]:
+    """Paths of the tensors that differ between two nested dicts of the same keys."""
+    if isinstance(first, dict):
+        assert isinstance(second, dict) and first.keys() == second.keys(), path
+        return [name for key in first for name in tensors_differing(first[key], second[key], f"{path}/{key}")]
+    if torch.is_tensor(first):
+        return [] if torch.equal(first, second) else [path]
+    return []
+
+
+@pytest.mark.parametrize(("algo", "env_id"), [("her", "FetchReach-v4"), ("dtd", "FetchPush-v4")])
+def test_two_workers_hold_the_same_parameters_and_statistics(tmp_path, algo, env_id):
+    run_dir = tmp_path / "run"
+    result = dtd("train", "--env", env_id, "--algo", algo, "--seed", "2", "--epochs", "2", *TINY,
+                 "--workers", "2", "--run-dir", run_dir)  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    rows = read_metrics(run_dir)
+    # An epoch is n_cycles cycles on every worker: 2 x 2 episodes x 2 workers.
+    assert [int(row["env_steps"]) for row in rows] == [8 * 50, 16 * 50]
+    assert [int(row["episodes"]) for row in rows] == [8, 16]
+    first = torch.load(run_dir / "checkpoints" / "latest.pt", weights_only=True)
+    shard = torch.load(run_dir / "checkpoints" / "workers" / "worker-1-epoch-2.pt", weights_only=True)
+    assert (first["worker"], shard["worker"]) == (0, 1)
+    learners = ["learner"] if algo == "her" else ["low", "high"]
+    for level in learners:
+        # Networks, targets, optimisers and normalisers: the same on both, bit for bit ...
+        assert tensors_differing(first["agent"][level], shard["agent"][level]) == [], level
+        # ... and the normalisers counted both workers' inputs.
+        assert first["agent"][level]["obs_norm"]["count"] > 0
+    # Each worker collected its own episodes.
+    assert tensors_differing(first["agent"]["buffer"]["data"], shard["agent"]["buffer"]["data"])
+    assert '"workers": 2' in (run_dir / "config.json").read_text()
+    # A run of several workers is looked at like any other.
+    result = dtd("eval", run_dir, "--episodes", "2")
+    assert result.returncode == 0, result.stderr
+
+
+@pytest.mark.parametrize("algo", ["her", "dtd"])
+def test_one_worker_is_a_run_of_its_own_bit_for_bit(tmp_path, algo):
+    # The reference was written by a run of its own before workers existed, with these settings.
+    run_dir = tmp_path / "run"
+    result = dtd("train", "--env", "FetchReach-v4", "--algo", algo, "--seed", "7", "--epochs", "2", *TINY,
+                 "--workers", "1", "--run-dir", run_dir)  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    reference = read_metrics(DATA / algo)
+    assert without_times(read_metrics(run_dir)) == without_times(reference)
+
+
+def test_a_killed_worker_stops_the_job_in_one_line_and_resume_finishes(tmp_path):
+    run_dir = tmp_path / "run"
+    args = [
+        "--env",
+        "FetchReach-v4",
+        "--algo",
+        "her",
+        "--seed",
+        "4",
+        "--epochs",
+        "4",
+        *TINY,
+        "--workers",
+        "2",
+    ]
+    launcher = subprocess.Popen(
+        [sys.executable, "-m", "dtd", "train", *args, "--run-dir", str(run_dir)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 240
+    while not (run_dir / "metrics.csv").exists():  # an epoch finished: kill within the next
+        assert launcher.poll() is None, launcher.communicate()
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    workers = subprocess.run(
+        ["pgrep", "-P", str(launcher.pid)], capture_output=True, text=True
+    ).stdout.split()
+    assert len(workers) == 2
+    killed = int(workers[1])
+    os.kill(killed, signal.SIGKILL)
+    started = time.monotonic()
+    _, stderr = launcher.communicate(timeout=60)
+    assert time.monotonic() - started < 60
+    assert launcher.returncode == 1
+    lines = [line for line in stderr.splitlines() if line.startswith("dtd:")]
+    assert len(lines) == 1, stderr
+    assert f"(pid {killed}) was killed by SIGKILL" in lines[0] and f"--resume {run_dir}" in lines[0]
+    assert "Traceback" not in stderr
+    result = dtd("train", "--resume", run_dir)
+    assert result.returncode == 0, result.stderr
+    assert [int(row["epoch"]) for row in read_metrics(run_dir)] == [1, 2, 3, 4]
+    assert sorted(path.name for path in (run_dir / "checkpoints" / "workers").iterdir()) == [
+        "worker-1-epoch-4.pt"
+    ]
+
+
+def test_bad_worker_input_is_one_line(tmp_path):
+    base = ["train", "--env", "FetchReach-v4", *TINY]
+    for args, message in [
+        (["--workers", "0"], "--workers must be at least 1, got 0"),
+        (["--workers", str((os.cpu_count() or 2) + 1)], "--oversubscribe starts them anyway"),
+    ]:
+        result = dtd(*base, *args, "--run-dir", tmp_path / "never")
+        assert result.returncode == 2 and message in result.stderr, result.stderr
+        assert len(result.stderr.strip().splitlines()) == 1
+        assert not (tmp_path / "never").exists()
+    run_dir = tmp_path / "two"
+    result = dtd(*base, "--epochs", "1", "--workers", "2", "--run-dir", run_dir)
+    assert result.returncode == 0, result.stderr
+    result = dtd("train", "--resume", run_dir, "--epochs", "2", "--workers", "3")
+    assert result.returncode == 2
+    assert "--workers cannot change when resuming (the run has 2)" in result.stderr
