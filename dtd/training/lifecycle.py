@@ -93,16 +93,16 @@ def train(
         with holding(run.root) if group.writes else contextlib.nullcontext():
             if resume is not None:
                 config, components, state = _resumed(run, config, group)
-                if components is None:
-                    return state  # trained to its end already: nothing is built or written
             else:
-                components, state = (
-                    build(config, worker=group.rank, collective=group.collective),
-                    TrainState(),
-                )
+                components = build(config, worker=group.rank, collective=group.collective)
+                state = TrainState()
                 if force and group.writes:
                     run.clear()
-            return _train_started(run, config, components, state, show_progress, group)
+            # A run trained to its end already has no components: nothing is built or written.
+            if components is not None:
+                state = _train_started(run, config, components, state, show_progress, group)
+            group.barrier()  # every worker is done before any leaves the group
+            return state
     except (KeyboardInterrupt, WorkerLost) as stop:
         stop.run_dir = run.root  # type: ignore[union-attr]  # how to continue, for the CLI
         raise
