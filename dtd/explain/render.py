@@ -233,6 +233,14 @@ def key_frames(
     return frames
 
 
+def marker_legend(rotation: bool, subgoals: bool) -> str:
+    """What the markers of a rendered episode stand for."""
+    if rotation:
+        legend = "the task's ghost block = goal"
+        return legend + (", green block = current sub-goal" if subgoals else "")
+    return "red = goal" + (", green = current sub-goal" if subgoals else "")
+
+
 def write_video(frames: Sequence[np.ndarray], path: Path, fps: int = 25) -> Path:
     """Frames as an H.264 MP4 (yuv420p, which browsers play)."""
     import imageio.v2 as imageio
@@ -308,7 +316,7 @@ def render_run(
             name = f"episode-{number}"
             title = (
                 f"{loaded.config.algo.value} on {spec.env_id}, epoch {loaded.snapshot['state']['epoch']}, "
-                f"episode {number}: red = goal" + (", green = current sub-goal" if bounds is not None else "")
+                f"episode {number}: {marker_legend(spec.quaternion is not None, bounds is not None)}"
             )
             written.append(
                 RenderedFiles(

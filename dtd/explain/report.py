@@ -78,7 +78,7 @@ def write_report(
     """Render ``episodes`` episodes, draw the curves (and, for dtd on a Fetch block task, the
     heatmaps after the first epoch and at ``checkpoint``) and write ``RUN/report.html``."""
     from dtd.experiments.plots import draw
-    from dtd.explain.render import render_run
+    from dtd.explain.render import marker_legend, render_run
 
     run = RunDir(Path(run_dir))
     config = read_config(run)
@@ -110,7 +110,7 @@ def write_report(
             + _image(files.strip, run.root, f"key frames of episode {number}")
             + f'<video controls preload="metadata" src="{_relative(files.video, run.root)}"></video>'
         )
-    legend = "Red: the task's goal." + (" Green: the current sub-goal." if config.algo is Algo.dtd else "")
+    legend = marker_legend(bool(spec.get("quaternion")), config.algo is Algo.dtd).capitalize() + "."
     sections.append(_section("Episodes", f"<p>{legend}</p>" + "".join(parts)))
     sections.append(_section("Plans", _plans_table([files.plan for files in rendered])))
 
