@@ -76,53 +76,45 @@ def worker(rank: int, workers: int, port: int, out: str) -> None:
             dist.all_reduce(tensor)
             times.append(time.perf_counter() - began)
         results[f"allreduce_{size}"] = 1000 * float(np.median(times))
-    from updates import ACT, GOAL, OBS, random_batch
-
     from dtd.agents.collective import ProcessGroup
-    from dtd.agents.ddpg import DDPGLearner
-    from dtd.agents.networks import BoxActionHead
-    from dtd.config import LearnerConfig
 
-    rng = np.random.default_rng(rank)
+    collective = ProcessGroup()
     for batch in BATCHES:
-        learner = DDPGLearner(
-            OBS, GOAL, ACT, BoxActionHead(1.0), LearnerConfig(batch_size=batch), 0.98, ProcessGroup()
-        )
-        batches = [random_batch(rng, batch) for _ in range(20)]
-        for b in batches[:10]:
-            learner.update(b)
-        began = time.perf_counter()
-        for index in range(200):
-            learner.update(batches[index % 20])
-        results[f"update_averaged_{batch}"] = 1000 * (time.perf_counter() - began) / 200
+        results[f"update_averaged_{batch}"] = ms_per_update(batch, np.random.default_rng(rank), collective)
     dist.barrier()
     dist.destroy_process_group()
     if rank == 0:
         Path(out).write_text(json.dumps(results))
 
 
-def updates_alone() -> dict[str, float]:
-    """ms per update of a learner of its own, 1 thread."""
-    import torch
-    from updates import ACT, GOAL, OBS, random_batch
+def ms_per_update(batch: int, rng: np.random.Generator, collective: object = None) -> float:
+    """ms per update (mean of 200 after 10 to warm up) of a fresh learner of FetchPush's sizes,
+    combining its gradients through ``collective`` where given."""
+    from updates import ACT, GOAL, OBS, random_batch  # benchmarks/updates.py
 
+    from dtd.agents.collective import ALONE
     from dtd.agents.ddpg import DDPGLearner
     from dtd.agents.networks import BoxActionHead
     from dtd.config import LearnerConfig
 
+    config = LearnerConfig(batch_size=batch)
+    learner = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), config, 0.98, collective or ALONE)
+    batches = [random_batch(rng, batch) for _ in range(20)]
+    for b in batches[:10]:
+        learner.update(b)
+    began = time.perf_counter()
+    for index in range(200):
+        learner.update(batches[index % 20])
+    return 1000 * (time.perf_counter() - began) / 200
+
+
+def updates_alone() -> dict[str, float]:
+    """ms per update of a learner of its own, 1 thread."""
+    import torch
+
     torch.set_num_threads(1)
     rng = np.random.default_rng(0)
-    figures = {}
-    for batch in BATCHES:
-        learner = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), LearnerConfig(batch_size=batch), 0.98)
-        batches = [random_batch(rng, batch) for _ in range(20)]
-        for b in batches[:10]:
-            learner.update(b)
-        began = time.perf_counter()
-        for index in range(200):
-            learner.update(batches[index % 20])
-        figures[f"update_alone_{batch}"] = 1000 * (time.perf_counter() - began) / 200
-    return figures
+    return {f"update_alone_{batch}": ms_per_update(batch, rng) for batch in BATCHES}
 
 
 def training(workers: int, algo: str, folder: Path) -> dict[str, float]:
