@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import signal
 import sys
 import warnings
@@ -52,13 +51,13 @@ def train(
         if workers > 1:
             _launch_workers(config, run_dir, resume, force, workers, oversubscribe)
             return
-    from dtd.training.launch import reports_for_itself
+    from dtd.training.launch import is_worker_zero
     from dtd.training.lifecycle import epochs_recorded
     from dtd.training.lifecycle import train as train_run
 
     before = epochs_recorded(resume) if resume is not None else 0
     state = train_run(config, run_dir=run_dir, resume=resume, force=force, show_progress=progress)
-    if not reports_for_itself() and os.environ.get("RANK", "0") != "0":
+    if not is_worker_zero():
         return  # worker 0 reports for the job
     if resume is not None and state.epoch <= before:
         print(

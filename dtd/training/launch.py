@@ -37,10 +37,15 @@ def local_workers() -> int:
     return int(value) if value.isdigit() and int(value) > 0 else 1
 
 
+def is_worker_zero() -> bool:
+    """Whether this process is a run of its own or worker 0 of a job (the one that reports)."""
+    return os.environ.get("RANK", "0").strip() in ("", "0")
+
+
 def reports_for_itself() -> bool:
     """Whether this process reports an interruption or a lost worker itself: a run of its own,
     or worker 0 of a torchrun job; locally launched workers leave it to their launcher."""
-    return LOCAL_LAUNCH not in os.environ and os.environ.get("RANK", "0").strip() in ("", "0")
+    return LOCAL_LAUNCH not in os.environ and is_worker_zero()
 
 
 def free_port() -> int:
