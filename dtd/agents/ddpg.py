@@ -208,6 +208,15 @@ class DDPGLearner:
         self.obs_norm.load_state_dict(state["obs_norm"])
         self.goal_norm.load_state_dict(state["goal_norm"])
 
+    def explaining_state(self) -> dict[str, Any]:
+        """The acting state and the critic: what acting and valuing need, nothing to train on."""
+        return {**self.acting_state(), "critic": self.critic.state_dict()}
+
+    def load_explaining_state(self, state: dict[str, Any]) -> None:
+        """Restore what :meth:`explaining_state` returned."""
+        self.load_acting_state(state)
+        self.critic.load_state_dict(state["critic"])
+
     def state_dict(self) -> dict[str, Any]:
         """Plain data: the acting state plus critic, target networks and optimisers."""
         return {

@@ -337,6 +337,15 @@ class DotToDotAgent:
         self.high.load_acting_state(state["high"])
         self.buffer.episodes_added = int(state["episodes_added"])
 
+    def explaining_state(self) -> dict[str, Any]:
+        # The low level only acts; the high level's critic values sub-goals (subgoal_values).
+        return {**self.acting_state(), "high": self.high.explaining_state()}
+
+    def load_explaining_state(self, state: dict[str, Any]) -> None:
+        self.low.load_acting_state(state["low"])
+        self.high.load_explaining_state(state["high"])
+        self.buffer.episodes_added = int(state["episodes_added"])
+
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.low.load_state_dict(state["low"])
         self.high.load_state_dict(state["high"])

@@ -93,6 +93,12 @@ class GoalConditionedAgent:
     def load_acting_state(self, state: dict[str, Any]) -> None:
         self.learner.load_acting_state(state["learner"])
 
+    def explaining_state(self) -> dict[str, Any]:
+        return {"learner": self.learner.explaining_state()}
+
+    def load_explaining_state(self, state: dict[str, Any]) -> None:
+        self.learner.load_explaining_state(state["learner"])
+
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.learner.load_state_dict(state["learner"])
         if "buffer" in state:

@@ -53,6 +53,15 @@ class Agent(Protocol):
         """Restore what :meth:`acting_state` returned."""
         ...
 
+    def explaining_state(self) -> dict[str, Any]:
+        """Plain data of what acting and valuing need (actors, critics that judge, normalisers):
+        a small snapshot to look at the agent later, not to train on."""
+        ...
+
+    def load_explaining_state(self, state: dict[str, Any]) -> None:
+        """Restore what :meth:`explaining_state` returned."""
+        ...
+
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore what :meth:`state_dict` returned."""
         ...

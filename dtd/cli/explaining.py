@@ -1,4 +1,5 @@
-"""Commands that look at a trained run: ``dtd eval``, ``dtd render``, ``dtd heatmap``, ``dtd report``."""
+"""Commands that look at a trained run: ``dtd eval``, ``dtd render``, ``dtd heatmap``, ``dtd report``,
+``dtd explore``."""
 
 from __future__ import annotations
 
@@ -152,6 +153,60 @@ def report(
 
     written = write_report(run_dir, episodes, checkpoint, seed, resolution)
     print(f"wrote {written.page} ({len(written.assets)} files beside it)")
+
+
+def explore(
+    run_dir: RunDirArgument,
+    host: str = "127.0.0.1",
+    port: int = 8765,
+    threads: int = 1,
+) -> None:
+    """Open a local web page to question a run: for dtd runs on FetchPush or FetchPickAndPlace,
+    drag the block and the goal and see the high level's value of every sub-goal and the one
+    it would choose, after any epoch kept; play episodes from that placement and watch them.
+    Works on a run that is still training. Ctrl-C stops it.
+
+    Examples:
+      dtd explore runs/push-dtd-0
+      dtd explore runs/push-dtd-0 --port 0
+
+    Args:
+        run_dir: The run directory.
+        host: The address to listen on; anything but this machine's own (127.0.0.1) lets
+            others reach the page, which has no login.
+        port: The port to listen on (0: any free one).
+        threads: Torch threads for the value maps.
+    """
+    import contextlib
+    import sys
+    import tempfile
+
+    import torch
+
+    try:
+        from dtd.explain.explore.server import is_loopback, serve
+    except ImportError as exc:
+        raise DtdError(
+            f"dtd explore needs its web server ({exc.name} is missing): pip install 'dtd[explore]'"
+        ) from exc
+
+    if threads < 1:
+        raise DtdError(f"--threads must be at least 1, got {threads}")
+    torch.set_num_threads(threads)
+    if not is_loopback(host):
+        print(
+            f"dtd explore: warning: listening on {host}: anyone who can reach it can use the page "
+            "(there is no login) and have episodes rendered on this machine",
+            file=sys.stderr,
+        )
+
+    def ready(url: str) -> None:
+        print(f"dtd explore: {run_dir} at {url}  (Ctrl-C stops it)", flush=True)
+
+    # The server stops on Ctrl-C and passes the interrupt on: here it is the way to stop.
+    with tempfile.TemporaryDirectory(prefix="dtd-explore-") as videos, contextlib.suppress(KeyboardInterrupt):
+        serve(run_dir, host, port, Path(videos), ready)
+    print("dtd explore: stopped", flush=True)
 
 
 def _numbers(text: str, option: str) -> list[float]:

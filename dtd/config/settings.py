@@ -119,7 +119,7 @@ given. With 3, Dot-to-Dot's low level reached 0.9 eval success on FetchPush at 1
 120k env steps (seeds 0-2) against 175k, 160k and 145k with one-step returns
 (docs/tuning.md); ``her`` and ``ddpg`` keep one-step returns, as the reference."""
 
-SETTINGS_BEFORE_THEIR_KEY = {"n_step": 1}
+SETTINGS_BEFORE_THEIR_KEY = {"n_step": 1, "explore_snapshots": 0}
 """Settings whose default changed after runs were written without them: a ``config.json``
 without the key was written when the run used this value."""
 
@@ -156,6 +156,11 @@ class TrainConfig:
     """Episodes collected per cycle, one per training environment, stepped together."""
     updates_per_cycle: int = 40
     """Gradient updates per cycle; the target networks move once after them."""
+    explore_snapshots: int = 100
+    """About how many agent-only snapshots (no replay, no optimiser) a run keeps in
+    checkpoints/epochs/ for ``dtd explore``: one after every k-th epoch, k = ceil(epochs /
+    this), and after the first and the last (every epoch when there are at most this many);
+    0 keeps none."""
     test_episodes: int = 10
     """Deterministic evaluation episodes at the end of every epoch."""
     buffer_size: int = 1_000_000

@@ -26,6 +26,10 @@ def validate(config: TrainConfig) -> None:
             f"--updates-per-cycle must be 0 or more, got {config.updates_per_cycle}",
         ),
         (
+            config.explore_snapshots >= 0,
+            f"--explore-snapshots must be 0 or more, got {config.explore_snapshots}",
+        ),
+        (
             config.test_episodes >= 1,
             f"--test-episodes must be at least 1, got {config.test_episodes}",
         ),

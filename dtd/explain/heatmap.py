@@ -72,15 +72,32 @@ def place_block_and_goal(
 ) -> dict[str, np.ndarray]:
     """Reset ``env``, put the block at ``start`` (x, y on the table) and the goal at ``goal``
     (x, y, or x, y, z), and return the observation read back from the simulator."""
-    table = table_of(env)
-    for name, point in (("--start", start), ("--goal", goal)):
+    check_on_table(table_of(env), start, goal)
+    env.reset(seed=seed)
+    return put_block_and_goal(env, start, goal)
+
+
+def check_on_table(
+    table: Table,
+    start: Sequence[float],
+    goal: Sequence[float],
+    names: tuple[str, str] = ("--start", "--goal"),
+) -> None:
+    """A :class:`ConfigError` when the block's or the goal's x, y lies off the table (each
+    called by its name in ``names``)."""
+    for name, point in zip(names, (start, goal), strict=True):
         x, y = point[0], point[1]
         if not (table.x[0] <= x <= table.x[1] and table.y[0] <= y <= table.y[1]):
             raise ConfigError(
                 f"{name} {x:.3f},{y:.3f} lies off the table (x {table.x[0]:.2f}..{table.x[1]:.2f}, "
                 f"y {table.y[0]:.2f}..{table.y[1]:.2f})"
             )
-    env.reset(seed=seed)
+
+
+def put_block_and_goal(env: gym.Env, start: Sequence[float], goal: Sequence[float]) -> dict[str, np.ndarray]:
+    """Put the block of a Fetch task at rest at ``start`` (x, y) and its goal at ``goal``, in the
+    episode ``env`` holds now; the observation read back from the simulator."""
+    table = table_of(env)
     unwrapped = env.unwrapped
     qpos = np.array([start[0], start[1], table.block_z, 1.0, 0.0, 0.0, 0.0])
     unwrapped._utils.set_joint_qpos(unwrapped.model, unwrapped.data, "object0:joint", qpos)
@@ -89,6 +106,19 @@ def place_block_and_goal(
     unwrapped.goal = np.array([goal[0], goal[1], goal_z], dtype=np.float64)
     mujoco.mj_forward(unwrapped.model, unwrapped.data)
     return unwrapped._get_obs()
+
+
+class PlacedStart(gym.Wrapper):
+    """A Fetch block task whose episodes start with the block and the goal where given."""
+
+    def __init__(self, env: gym.Env, start: Sequence[float], goal: Sequence[float]) -> None:
+        super().__init__(env)
+        check_on_table(table_of(env), start, goal)
+        self.start, self.goal = tuple(start), tuple(goal)
+
+    def reset(self, **kwargs):  # type: ignore[override]
+        _, info = self.env.reset(**kwargs)
+        return put_block_and_goal(self.env, self.start, self.goal), info
 
 
 def value_slice(

@@ -113,6 +113,7 @@ def write_report(
     legend = marker_legend(bool(spec.get("quaternion")), config.algo is Algo.dtd).capitalize() + "."
     sections.append(_section("Episodes", f"<p>{legend}</p>" + "".join(parts)))
     sections.append(_section("Plans", _plans_table([files.plan for files in rendered])))
+    sections.append(_section("Questioning the run", _explore_note(run, config, bool(spec.get("quaternion")))))
 
     title = f"{config.algo.value} on {config.env}: {run.root.name}"
     page = run.root / "report.html"
@@ -163,6 +164,25 @@ _NO_MAP_FOR_ROTATIONS = (
     "ended, and its angle to the goal; the key frames show the sub-goal as a green ghost block "
     "beside the goal's.</p>"
 )
+
+
+def _explore_note(run: RunDir, config: Any, rotation: bool) -> str:
+    """How to open this run in ``dtd explore``, and what it shows for this run."""
+    command = html.escape(f"dtd explore {run.root}")
+    if rotation:
+        what = "play episodes of any epoch kept and read their plans"
+    elif config.algo is Algo.dtd:
+        what = (
+            "drag the block and the goal and watch the high level's values and its chosen sub-goal "
+            "follow them, after any epoch kept, and play episodes from any placement"
+        )
+    else:
+        what = "play episodes of any epoch kept from any placement of the block and the goal"
+    return (
+        f"<p>This page is fixed. To ask the run your own questions ({what}), run "
+        f"<code>{command}</code> and open the address it prints (a page served on this machine; "
+        "it needs the <code>explore</code> extra: <code>pip install 'dtd[explore]'</code>).</p>"
+    )
 
 
 def _heatmap_section(run: RunDir, checkpoint: str, resolution: int, assets: list[Path]) -> str:

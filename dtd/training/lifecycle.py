@@ -25,7 +25,7 @@ from dtd.training.trainer import Trainer, TrainState, restore
 from dtd.training.workers import SOLO, WorkerGroup, join_group, leave_group
 
 # Settings that may change when a run is resumed; any other must stay as the run began.
-RESUMABLE_SETTINGS = frozenset({"epochs", "threads", "collector"})
+RESUMABLE_SETTINGS = frozenset({"epochs", "threads", "collector", "explore_snapshots"})
 _RESUMABLE_FLAGS = ", ".join("--" + name for name in sorted(RESUMABLE_SETTINGS))
 
 

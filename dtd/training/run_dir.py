@@ -6,6 +6,8 @@ tensorboard/           TensorBoard event files with the same figures
 checkpoints/latest.pt  everything needed to resume, after the last finished epoch
 checkpoints/best.pt    the agent with the best evaluation success (no replay)
 checkpoints/first.pt   the agent after the first epoch (no replay), to compare with the last
+checkpoints/epochs/    the agent alone (no replay, no optimiser) after epoch E
+                       (epoch-E.pt), for dtd explore; see TrainConfig.explore_snapshots
 checkpoints/workers/   with data-parallel workers: worker k's replay and random state after
                        epoch E (worker-k-epoch-E.pt); latest.pt is worker 0's
 """
@@ -63,6 +65,23 @@ class RunDir:
     @property
     def first(self) -> Path:
         return self.checkpoints / "first.pt"
+
+    @property
+    def epoch_snapshots_dir(self) -> Path:
+        return self.checkpoints / "epochs"
+
+    def epoch_snapshot(self, epoch: int) -> Path:
+        """The agent-only snapshot kept after ``epoch``."""
+        return self.epoch_snapshots_dir / f"epoch-{epoch}.pt"
+
+    def epoch_snapshots(self) -> dict[int, Path]:
+        """The agent-only snapshots there are now, by epoch (in order)."""
+        found = {}
+        for path in self.epoch_snapshots_dir.glob("epoch-*.pt"):
+            number = path.stem.removeprefix("epoch-")
+            if number.isdigit():
+                found[int(number)] = path
+        return dict(sorted(found.items()))
 
     def worker_shard(self, worker: int, epoch: int) -> Path:
         """Where data-parallel worker ``worker`` (> 0) keeps its state after ``epoch``."""

@@ -6,6 +6,7 @@ Every collaborator is built elsewhere and passed in; the trainer is the only wri
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -151,7 +152,23 @@ class Trainer:
             save_atomic(self.run.best, self.snapshot(state, include_replay=False))
         if state.epoch == 1:  # kept to show what one epoch had learned (dtd heatmap)
             save_atomic(self.run.first, self.snapshot(state, include_replay=False))
+        if keeps_epoch_snapshot(state.epoch, self.config):
+            save_atomic(self.run.epoch_snapshot(state.epoch), self.epoch_snapshot(state))
         save_atomic(self.run.latest, self.snapshot(state, include_replay=True))
+
+    def epoch_snapshot(self, state: TrainState) -> dict[str, Any]:
+        """The agent alone after ``state``'s epoch, as ``dtd explore`` reads it."""
+        return {
+            "env_id": self.spec.env_id,
+            "algo": self.config.algo.value,
+            "spec": dataclasses.asdict(self.spec),
+            "state": {
+                "epoch": state.epoch,
+                "env_steps": state.env_steps,
+                "eval_success": state.history[-1]["eval_success"],
+            },
+            "agent": self.agent.explaining_state(),
+        }
 
     def snapshot(self, state: TrainState, include_replay: bool) -> dict[str, Any]:
         """Everything needed to continue exactly where ``state`` stands."""
@@ -170,6 +187,15 @@ class Trainer:
                 "eval_envs": env_rng_states(self.eval_envs),
             },
         }
+
+
+def keeps_epoch_snapshot(epoch: int, config: TrainConfig) -> bool:
+    """Whether a run keeps an agent-only snapshot after ``epoch``: every k-th epoch, with
+    k = ceil(epochs / explore_snapshots), and the first and the last."""
+    if config.explore_snapshots == 0:
+        return False
+    every = math.ceil(config.epochs / config.explore_snapshots)
+    return epoch == 1 or epoch == config.epochs or epoch % every == 0
 
 
 def restore(

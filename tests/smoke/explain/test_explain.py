@@ -6,7 +6,6 @@ import json
 import re
 import shutil
 import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -28,7 +27,7 @@ from dtd.explain.render import (
 )
 from dtd.training.components import close_all
 from dtd.training.trained_run import load_run
-from tests.helpers import TINY, dtd
+from tests.helpers import dtd
 
 pytestmark = pytest.mark.smoke
 
@@ -46,16 +45,6 @@ def colour_near(frame: np.ndarray, pixel: tuple[float, float], test) -> bool:
     column, row = round(pixel[0]), round(pixel[1])
     patch = frame[max(row - 1, 0) : row + 2, max(column - 1, 0) : column + 2].reshape(-1, 3)
     return any(test(value) for value in patch)
-
-
-@pytest.fixture(scope="module")
-def push_dtd_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A tiny dtd run on FetchPush (2 epochs): it keeps checkpoints after epoch 1 and 2."""
-    run_dir = tmp_path_factory.mktemp("explain") / "push-dtd"
-    args = ["train", "--env", "FetchPush-v4", "--algo", "dtd", "--epochs", "2", "--seed", "1", *TINY]
-    result = dtd(*args, "--run-dir", run_dir)
-    assert result.returncode == 0, result.stderr
-    return run_dir
 
 
 def test_a_run_keeps_its_first_epoch_checkpoint(push_dtd_run):
@@ -183,6 +172,7 @@ def test_report_opens_in_a_browser_with_every_image_and_video_loaded(push_dtd_ru
     assert all('data-status="loaded"' in tag for tag in tags), tags
     text = page.read_text()
     assert "Configuration" in text and "Plans" in text and "--segments" in text
+    assert f"dtd explore {run_dir}" in text
 
 
 def test_a_hand_subgoal_is_a_green_ghost_block_beside_the_goals():

@@ -1,0 +1,319 @@
+"""What ``dtd explore`` asks of a run, without the web: its epochs, the high level's value
+map for a block and a goal placed by hand, and episodes played from such a placement.
+
+One :class:`Explorer` owns one evaluation environment and one agent; the agent takes the
+weights of whichever epoch is asked for from the run's agent-only snapshots
+(``checkpoints/epochs/``, read again on every call: a run still training adds them). Its
+methods touch the simulator and the renderer, so they are called from one thread at a time
+(the server runs them all on one worker thread).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import time
+from collections import OrderedDict
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dtd.agents.dot_to_dot import DotToDotAgent
+from dtd.agents.segments import episode_plan
+from dtd.config import Algo, Collection
+from dtd.errors import CheckpointError, ConfigError, DtdError, EnvError
+from dtd.explain.heatmap import (
+    PlacedStart,
+    Table,
+    check_on_table,
+    place_block_and_goal,
+    table_of,
+    value_slice,
+)
+from dtd.training.checkpoint import check_checkpoint, load_checkpoint, restoring
+from dtd.training.components import build, close_all
+from dtd.training.run_dir import RunDir, read_config
+from dtd.training.trained_run import EVAL_SEED
+
+MAP_RESOLUTION = 50
+"""Cells along each side of the table in a value map, unless asked otherwise."""
+MAX_RESOLUTION = 200
+KEPT_STATES = 16
+"""Epochs whose weights stay in memory (a FetchPush dtd epoch is about 1.7 MB)."""
+KEPT_VIDEOS = 20
+"""Played episodes whose videos stay on disk; older ones are removed."""
+FRAME_SIZE = 384
+"""Frames of played episodes, in pixels (a multiple of 16, as H.264 wants)."""
+
+
+class ExploreError(DtdError):
+    """A request the explorer cannot answer; ``status`` is the HTTP status that says why."""
+
+    def __init__(self, status: int, message: str) -> None:
+        super().__init__(message)
+        self.status = status
+
+
+@dataclasses.dataclass(frozen=True)
+class EpochSnapshot:
+    """One epoch the explorer can show."""
+
+    epoch: int
+    env_steps: int
+    eval_success: float | None
+    path: Path
+    whole: bool = False
+    """A whole checkpoint (first.pt, latest.pt) rather than an agent-only snapshot."""
+
+
+class Explorer:
+    """A run's agent at any kept epoch, on an environment of its task."""
+
+    def __init__(self, run_dir: Path | str, videos: Path, seed: int = EVAL_SEED) -> None:
+        self.run = RunDir(Path(run_dir))
+        self.config = read_config(self.run)
+        self.videos = Path(videos)
+        self.components = build(self.config, eval_seed=seed, eval_envs=1, collection=Collection.inline)
+        self.components.collector.close()
+        self.env = self.components.eval_envs[0]
+        self.agent = self.components.agent
+        self.spec = self.components.spec
+        self.rng = np.random.default_rng(seed)
+        self.episode_seeds = itertools.count(seed)
+        self.videos_made = itertools.count(1)
+        self.states: OrderedDict[tuple[Path, int], tuple[dict[str, Any], dict[str, Any]]] = OrderedDict()
+        self.loaded: tuple[Path, int] | None = None
+        self.renderer = None
+        self.table: Table | None = None
+        self.no_map_reason = ""
+        if self.config.algo is not Algo.dtd:
+            self.no_map_reason = f"a {self.config.algo.value} run has no high level to map"
+        else:
+            try:
+                self.table = table_of(self.env)
+            except EnvError:
+                self.no_map_reason = (
+                    "this task's goal is not a point on a table (for the Hand tasks it is the "
+                    "block's orientation, a unit quaternion), so there is no table to map the "
+                    "high level's values over; its plans and videos show what it asks for"
+                )
+        self.legacy = self._legacy_checkpoints()
+
+    # -- what there is to see ------------------------------------------------------------
+    def epochs(self) -> list[EpochSnapshot]:
+        """The epochs there are snapshots of now, in order."""
+        found = [EpochSnapshot(epoch, -1, None, path) for epoch, path in self.run.epoch_snapshots().items()]
+        return found or list(self.legacy)
+
+    def describe(self) -> dict[str, Any]:
+        """The run, its task and its epochs, as the page needs them."""
+        epochs = self.epochs()
+        info: dict[str, Any] = {
+            "run": str(self.run.root),
+            "env": self.config.env,
+            "algo": self.config.algo.value,
+            "epochs_planned": self.config.epochs,
+            "epochs": [snapshot.epoch for snapshot in epochs],
+            "map": self.table is not None,
+            "no_map_reason": self.no_map_reason,
+            "placeable": self._placeable(),
+            "resolution": MAP_RESOLUTION,
+            "progress": self._progress(),
+        }
+        if not epochs:
+            info["waiting"] = (
+                "no epoch has finished yet: the run keeps a snapshot of its agent after each epoch "
+                "(checkpoints/epochs/), and the page shows them as they appear"
+            )
+        if self.table is not None:
+            info["table"] = {"x": self.table.x, "y": self.table.y, "block_z": self.table.block_z}
+            info["goal_in_air"] = bool(getattr(self.env.unwrapped, "target_in_the_air", False))
+        return info
+
+    # -- the value map -------------------------------------------------------------------
+    def value_map(
+        self,
+        epoch: int,
+        block: tuple[float, float],
+        goal: tuple[float, float, float | None],
+        z: float | None = None,
+        resolution: int = MAP_RESOLUTION,
+    ) -> dict[str, Any]:
+        """The high level's value of every cell of a ``resolution`` squared grid over the
+        table at height ``z`` (default: the block's resting height) and the sub-goal it would
+        choose, with the block at ``block`` and the goal at ``goal`` (its z None: on the table)."""
+        began = time.perf_counter()
+        if self.table is None:
+            raise ExploreError(409, f"no value map for this run: {self.no_map_reason}")
+        if not 2 <= resolution <= MAX_RESOLUTION:
+            raise ExploreError(422, f"resolution must lie in 2..{MAX_RESOLUTION}, got {resolution}")
+        table = self.table
+        height = table.block_z if z is None else z
+        lowest, highest = table.block_z, table.block_z + 0.5
+        if not lowest <= height <= highest:
+            raise ExploreError(422, f"z {height:.3f} lies outside {lowest:.3f}..{highest:.3f} m")
+        goal_point = self._goal_point(goal)
+        snapshot = self._use_epoch(epoch)
+        self._check_on_table(block, goal_point)
+        observation = place_block_and_goal(self.env, block, goal_point)
+        heat = value_slice(self.agent, observation, table, height, resolution)
+        row, column = np.unravel_index(int(np.argmax(heat.values)), heat.values.shape)
+        return {
+            "epoch": snapshot.epoch,
+            "env_steps": snapshot.env_steps,
+            "eval_success": snapshot.eval_success,
+            "xs": heat.xs.tolist(),
+            "ys": heat.ys.tolist(),
+            "z": heat.z,
+            "values": heat.values.astype(float).round(6).tolist(),
+            "block": heat.start.astype(float).tolist(),
+            "goal": heat.goal.astype(float).tolist(),
+            "subgoal": heat.subgoal.astype(float).tolist(),
+            "highest": [float(heat.xs[column]), float(heat.ys[row]), heat.z],
+            "value_range": [float(heat.values.min()), float(heat.values.max())],
+            "compute_ms": round((time.perf_counter() - began) * 1000, 1),
+        }
+
+    # -- episodes ------------------------------------------------------------------------
+    def play(
+        self,
+        epoch: int,
+        block: tuple[float, float] | None = None,
+        goal: tuple[float, float, float | None] | None = None,
+    ) -> dict[str, Any]:
+        """Render one deterministic episode of ``epoch``'s agent, from the block and goal given
+        (Fetch block tasks) or from the task's own random start; the video's file name and the
+        episode's plan."""
+        from dtd.explain.render import SceneRenderer, camera_for, render_episode, write_video
+
+        snapshot = self._use_epoch(epoch)
+        env = self.env
+        if block is not None or goal is not None:
+            if not self._placeable():
+                raise ExploreError(409, "this task's block and goal cannot be placed by hand")
+            if block is None or goal is None:
+                raise ExploreError(422, "give both the block and the goal, or neither")
+            goal_point = self._goal_point(goal)
+            self._check_on_table(block, goal_point)
+            env = PlacedStart(self.env, block, goal_point)
+        if self.renderer is None:
+            self.renderer = SceneRenderer(self.env, FRAME_SIZE, FRAME_SIZE, camera_for(self.spec.env_id))
+        self.env.reset(seed=next(self.episode_seeds))
+        dtd = isinstance(self.agent, DotToDotAgent)
+        bounds = self.agent.bounds if dtd else None
+        plan_of = self.agent.plan if dtd else None
+        rendered = render_episode(env, self.agent, self.spec, self.renderer, self.rng, bounds, plan_of)
+        name = f"episode-{next(self.videos_made)}.mp4"
+        write_video(rendered.frames, self.videos / name)
+        self._forget_old_videos()
+        plan = plan_of(rendered.episode)[0] if plan_of else episode_plan(rendered.episode, 0, None)
+        return {"epoch": snapshot.epoch, "video": name, "plan": _plain(plan)}
+
+    def close(self) -> None:
+        if self.renderer is not None:
+            self.renderer.close()
+        close_all(self.components)
+
+    # -- inside ----------------------------------------------------------------------------
+    def _placeable(self) -> bool:
+        return self.table is not None or (self.config.algo is not Algo.dtd and self._has_table())
+
+    def _has_table(self) -> bool:
+        try:
+            table_of(self.env)
+        except EnvError:
+            return False
+        return True
+
+    def _check_on_table(self, block: Sequence[float], goal: Sequence[float]) -> None:
+        try:
+            check_on_table(table_of(self.env), block, goal, ("the block", "the goal"))
+        except ConfigError as exc:
+            raise ExploreError(422, str(exc)) from exc
+
+    def _goal_point(self, goal: tuple[float, float, float | None]) -> tuple[float, ...]:
+        x, y, z = goal
+        if z is None:
+            return (x, y)
+        table = table_of(self.env)
+        if not table.block_z <= z <= table.block_z + 0.5:
+            raise ExploreError(
+                422, f"the goal's z {z:.3f} lies outside {table.block_z:.3f}..{table.block_z + 0.5:.3f} m"
+            )
+        return (x, y, z)
+
+    def _use_epoch(self, epoch: int) -> EpochSnapshot:
+        snapshots = {snapshot.epoch: snapshot for snapshot in self.epochs()}
+        snapshot = snapshots.get(epoch)
+        if snapshot is None:
+            kept = ", ".join(map(str, snapshots)) or "none yet"
+            raise ExploreError(404, f"no snapshot of epoch {epoch} in this run (epochs kept: {kept})")
+        key = (snapshot.path, snapshot.path.stat().st_mtime_ns)
+        if key not in self.states:
+            stored = load_checkpoint(snapshot.path)
+            check_checkpoint(stored, self.config, self.spec, snapshot.path)
+            self.states[key] = (stored["agent"], stored["state"])
+            while len(self.states) > KEPT_STATES:
+                self.states.popitem(last=False)
+        self.states.move_to_end(key)
+        agent_state, counters = self.states[key]
+        if self.loaded != key:
+            with restoring(snapshot.path):
+                if snapshot.whole:
+                    self.agent.load_state_dict({k: v for k, v in agent_state.items() if k != "buffer"})
+                else:
+                    self.agent.load_explaining_state(agent_state)
+            self.loaded = key
+        return dataclasses.replace(
+            snapshot,
+            env_steps=int(counters.get("env_steps", -1)),
+            eval_success=counters.get("eval_success", snapshot.eval_success),
+        )
+
+    def _legacy_checkpoints(self) -> list[EpochSnapshot]:
+        """For runs made before agent-only snapshots were kept: first.pt and latest.pt."""
+        if self.run.epoch_snapshots():
+            return []
+        found: dict[int, EpochSnapshot] = {}
+        for path in (self.run.first, self.run.latest):
+            if not path.is_file():
+                continue
+            try:
+                state = load_checkpoint(path)["state"]
+            except CheckpointError:
+                continue
+            history = state.get("history") or [{}]
+            found[state["epoch"]] = EpochSnapshot(
+                state["epoch"], state["env_steps"], history[-1].get("eval_success"), path, whole=True
+            )
+        return [found[epoch] for epoch in sorted(found)]
+
+    def _progress(self) -> dict[str, Any] | None:
+        """The last finished epoch in metrics.csv (a run may still be training)."""
+        if not self.run.metrics.is_file():
+            return None
+        lines = self.run.metrics.read_text().strip().splitlines()
+        if len(lines) < 2:
+            return None
+        row = dict(zip(lines[0].split(","), lines[-1].split(","), strict=False))
+        return {"epoch": int(row["epoch"]), "env_steps": int(row["env_steps"])}
+
+    def _forget_old_videos(self) -> None:
+        videos = sorted(self.videos.glob("episode-*.mp4"), key=lambda path: path.stat().st_mtime_ns)
+        for path in videos[:-KEPT_VIDEOS]:
+            path.unlink(missing_ok=True)
+
+
+def _plain(value: Any) -> Any:
+    """``value`` with numpy scalars and arrays made JSON's."""
+    if isinstance(value, dict):
+        return {key: _plain(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(item) for item in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
