@@ -74,8 +74,8 @@ class DDPGLearner:
     def inputs(self, obs: np.ndarray | torch.Tensor, goal: np.ndarray | torch.Tensor) -> torch.Tensor:
         """Clipped, normalised o || g as the networks see it."""
         clip = self.config.obs_clip
-        obs_t = torch.clamp(torch.as_tensor(obs, dtype=torch.float32), -clip, clip)
-        goal_t = torch.clamp(torch.as_tensor(goal, dtype=torch.float32), -clip, clip)
+        obs_t = torch.clamp(_float_tensor(obs), -clip, clip)
+        goal_t = torch.clamp(_float_tensor(goal), -clip, clip)
         return torch.cat([self.obs_norm.normalize(obs_t), self.goal_norm.normalize(goal_t)], dim=-1)
 
     def _policy(
@@ -87,18 +87,26 @@ class DDPGLearner:
     def _q(self, critic: nn.Module, inputs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         return critic(inputs, self.head.critic_features(action, self.goal_norm))
 
+    def action_of(self, obs: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+        """Deterministic actions mu(o, g) of raw (unnormalised) float32 tensors, inputs clipped
+        and normalised and the action scaled as in acting (e.g. to trace the acting path)."""
+        return self._policy(self.actor, self.inputs(obs, goal), obs)[0]
+
+    def value_of(self, obs: torch.Tensor, goal: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        """Q(o, g, a) of raw float32 tensors, as :meth:`q_values` computes it."""
+        return self._q(self.critic, self.inputs(obs, goal), action)
+
     @torch.no_grad()
     def act(self, obs: np.ndarray, goal: np.ndarray) -> np.ndarray:
         """Deterministic actions mu(o, g) for a batch."""
         obs_t = torch.as_tensor(obs, dtype=torch.float32)
-        return self._policy(self.actor, self.inputs(obs_t, goal), obs_t)[0].numpy()
+        return self.action_of(obs_t, torch.as_tensor(goal, dtype=torch.float32)).numpy()
 
     @torch.no_grad()
     def q_values(self, obs: np.ndarray, goal: np.ndarray, action: np.ndarray) -> np.ndarray:
         """Q(o, g, a) for a batch."""
-        return self._q(
-            self.critic, self.inputs(obs, goal), torch.as_tensor(action, dtype=torch.float32)
-        ).numpy()
+        obs_t, goal_t, action_t = (torch.as_tensor(x, dtype=torch.float32) for x in (obs, goal, action))
+        return self.value_of(obs_t, goal_t, action_t).numpy()
 
     def update_normalizers(self, obs: np.ndarray, goal: np.ndarray) -> None:
         """Add observations and goals to the running statistics of the inputs."""
@@ -236,6 +244,12 @@ class DDPGLearner:
         self.critic_target.load_state_dict(state["critic_target"])
         self.actor_optim.load_state_dict(state["actor_optim"])
         self.critic_optim.load_state_dict(state["critic_optim"])
+
+
+def _float_tensor(values: np.ndarray | torch.Tensor) -> torch.Tensor:
+    # A tensor passes through untouched, so that tracing the acting path (ONNX export) keeps
+    # it an input rather than a constant.
+    return values if isinstance(values, torch.Tensor) else torch.as_tensor(values, dtype=torch.float32)
 
 
 def _frozen_copy(module: nn.Module) -> nn.Module:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import sys
 
-from dtd.cli.explaining import evaluate, explore, heatmap, render, report
+from dtd.cli.explaining import evaluate, explore, export, heatmap, render, report
 from dtd.cli.options import REQUIRED_ENV_UNLESS_RESUMED, deferred, options_class, parse_command
 from dtd.cli.training import plot, sweep, train
 from dtd.config import Preset, preset_config
@@ -46,6 +46,7 @@ def main(argv: list[str] | None = None) -> None:
         "heatmap": deferred(heatmap),
         "report": deferred(report),
         "explore": deferred(explore),
+        "export": deferred(export),
     }
     try:
         if args[:1] == ["sweep"] and any(arg == "--algo" or arg.startswith("--algo=") for arg in args):

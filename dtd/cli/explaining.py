@@ -1,5 +1,5 @@
 """Commands that look at a trained run: ``dtd eval``, ``dtd render``, ``dtd heatmap``, ``dtd report``,
-``dtd explore``."""
+``dtd explore``, ``dtd export``."""
 
 from __future__ import annotations
 
@@ -207,6 +207,41 @@ def explore(
     with tempfile.TemporaryDirectory(prefix="dtd-explore-") as videos, contextlib.suppress(KeyboardInterrupt):
         serve(run_dir, host, port, Path(videos), ready)
     print("dtd explore: stopped", flush=True)
+
+
+def export(
+    run_dir: RunDirArgument,
+    checkpoint: str = "latest",
+    out: Annotated[Path | None, optional("DIR", "RUN_DIR/export")] = None,
+    force: bool = False,
+) -> None:
+    """Export a trained agent as ONNX models that run without dtd or torch (ONNX Runtime, a C++
+    controller, a ROS node): her/ddpg one policy (observation, goal) -> action; dtd its low
+    level (observation, sub-goal) -> action, its high level (observation, achieved goal, goal)
+    -> sub-goal and the high level's critic. Input normalisation, clipping and action scaling
+    are inside. Also writes policy.json (dimensions, when to ask for a sub-goal, versions) and
+    a README.md with an example.
+
+    Examples:
+      dtd export runs/push-dtd-0 --out push-dtd-onnx/
+
+    Args:
+        run_dir: The run directory.
+        checkpoint: latest, best, first, or the path of a checkpoint file of this run.
+        out: Where the files go.
+        force: Replace the models in an --out that already holds files.
+    """
+    from dtd.export.onnx_files import export_run
+
+    target = out if out is not None else run_dir / "export"
+    exported = export_run(run_dir, target, checkpoint, force)
+    for path in exported.files:
+        print(f"{path}  ({path.stat().st_size:,} bytes)")
+    source = exported.policy["checkpoint"]
+    print(
+        f"epoch {source['epoch']}, {source['env_steps']:,} env steps; ONNX opset {exported.policy['opset']}; "
+        f"largest difference from the torch agent {exported.largest_difference:.1e}"
+    )
 
 
 def _numbers(text: str, option: str) -> list[float]:

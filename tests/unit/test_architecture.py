@@ -13,7 +13,7 @@ import dtd
 
 PACKAGE = Path(dtd.__file__).parent
 
-WINGS = ("envs", "agents", "training", "experiments", "explain", "cli")
+WINGS = ("envs", "agents", "training", "experiments", "explain", "export", "cli")
 """The package's parts from the bottom up: each may import the ones before it, never one after."""
 
 BASE = ("config", "errors")

@@ -1,0 +1,1 @@
+"""Trained agents taken elsewhere: ONNX models of their acting paths (``dtd export``)."""

@@ -1,0 +1,155 @@
+"""``dtd export``: ONNX Runtime's outputs equal the torch agent's on recorded observations, an
+episode driven by the exported models alone (no dtd in that process) ends where the torch
+agent's does, and bad input is refused in one line."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dtd.agents.dot_to_dot import DotToDotAgent
+from dtd.agents.segments import high_level_input
+from dtd.envs.make import make_env
+from dtd.training.components import close_all
+from dtd.training.rollout import run_many
+from tests.helpers import dtd
+
+onnxruntime = pytest.importorskip("onnxruntime", reason="dtd export needs the [export] extra")
+
+RECORDED = 1_000
+
+
+@pytest.fixture(scope="module")
+def exported(push_dtd_run, reach_run, tmp_path_factory) -> dict[str, Path]:
+    folders = {}
+    for name, run in (("dtd", push_dtd_run), ("her", reach_run)):
+        out = tmp_path_factory.mktemp("export") / name
+        result = dtd("export", run, "--out", out)
+        assert result.returncode == 0, result.stderr
+        assert "largest difference from the torch agent" in result.stdout
+        folders[name] = out
+    return folders
+
+
+def recorded(run_dir: Path) -> tuple[object, dict[str, np.ndarray]]:
+    """The run's agent and the observations of deterministic episodes (at least RECORDED steps)."""
+    from dtd.training.trained_run import load_run
+
+    loaded = load_run(run_dir, "latest", seed=5, envs=10)
+    components = loaded.components
+    episodes = run_many(
+        components.eval_envs, components.agent, components.spec, -(-RECORDED // 50), False, components.rng
+    )
+    close_all(components)
+    steps = {
+        "observation": episodes.obs[:, :-1].reshape(-1, components.spec.obs_dim)[:RECORDED],
+        "achieved_goal": episodes.achieved_goal[:, :-1].reshape(-1, components.spec.goal_dim)[:RECORDED],
+        "goal": np.repeat(episodes.desired_goal, components.spec.horizon, axis=0)[:RECORDED],
+        "step_goal": episodes.step_goal.reshape(-1, components.spec.goal_dim)[:RECORDED],
+    }
+    return components.agent, steps
+
+
+def session(folder: Path, role: str):
+    policy = json.loads((folder / "policy.json").read_text())
+    return onnxruntime.InferenceSession(str(folder / policy["models"][role]["file"]))
+
+
+def test_policy_json_says_what_a_program_needs(exported):
+    dtd_policy = json.loads((exported["dtd"] / "policy.json").read_text())
+    assert dtd_policy["env_id"] == "FetchPush-v4" and dtd_policy["algo"] == "dtd"
+    assert set(dtd_policy["models"]) == {"low_level", "high_level", "high_level_value"}
+    assert dtd_policy["segments"]["bounds"][0] == 0 and dtd_policy["segments"]["bounds"][-1] == 50
+    assert dtd_policy["checkpoint"]["epoch"] == 2 and dtd_policy["opset"] >= 13
+    assert {"dtd", "torch", "onnx", "onnxruntime"} <= set(dtd_policy["versions"])
+    assert len(dtd_policy["goal_box"]["low"]) == 3
+    her_policy = json.loads((exported["her"] / "policy.json").read_text())
+    assert set(her_policy["models"]) == {"policy"} and "segments" not in her_policy
+    low = session(exported["dtd"], "low_level")
+    assert [i.name for i in low.get_inputs()] == ["observation", "subgoal"]
+    assert [o.name for o in low.get_outputs()] == ["action"]
+    assert low.get_inputs()[0].shape[0] == "batch"
+
+
+def test_onnx_outputs_equal_the_torch_agents_on_recorded_observations(exported, push_dtd_run, reach_run):
+    agent, steps = recorded(push_dtd_run)
+    assert isinstance(agent, DotToDotAgent) and len(steps["observation"]) == RECORDED
+    obs, achieved, goal = steps["observation"], steps["achieved_goal"], steps["goal"]
+    folder = exported["dtd"]
+    (actions,) = session(folder, "low_level").run(None, {"observation": obs, "subgoal": steps["step_goal"]})
+    np.testing.assert_allclose(actions, agent.low.act(obs, steps["step_goal"]), atol=1e-5)
+    feeds = {"observation": obs, "achieved_goal": achieved, "goal": goal}
+    (subgoals,) = session(folder, "high_level").run(None, feeds)
+    np.testing.assert_allclose(subgoals, agent.propose_subgoals(obs, achieved, goal), atol=1e-5)
+    candidates = (achieved + np.random.default_rng(0).normal(0, 0.1, achieved.shape)).astype(np.float32)
+    (values,) = session(folder, "high_level_value").run(None, {**feeds, "subgoal": candidates})
+    expected = agent.high.q_values(high_level_input(obs, achieved), goal, candidates)
+    np.testing.assert_allclose(values, expected, atol=1e-5, rtol=1e-6)
+
+    agent, steps = recorded(reach_run)
+    (actions,) = session(exported["her"], "policy").run(
+        None, {"observation": steps["observation"], "goal": steps["goal"]}
+    )
+    np.testing.assert_allclose(actions, agent.learner.act(steps["observation"], steps["goal"]), atol=1e-5)
+
+
+def torch_episode(run_dir: Path, seed: int) -> np.ndarray:
+    """The final achieved goal of the torch agent's deterministic episode from env.reset(seed)."""
+    from dtd.training.trained_run import load_run
+
+    loaded = load_run(run_dir)
+    agent, spec = loaded.components.agent, loaded.components.spec
+    close_all(loaded.components)
+    env = make_env(spec.env_id)
+    o, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(0)
+    for t in range(spec.horizon):
+        goal = agent.step_goal(
+            o["observation"][None], o["achieved_goal"][None], o["desired_goal"][None], t, False, rng
+        )
+        action = agent.act(o["observation"][None].astype(np.float32), goal.astype(np.float32), False, rng)
+        o, *_ = env.step(action[0])
+    env.close()
+    return o["achieved_goal"]
+
+
+@pytest.mark.parametrize("name", ["dtd", "her"])
+def test_the_readme_example_drives_an_episode_without_dtd(exported, push_dtd_run, reach_run, name):
+    folder = exported[name]
+    code = re.search(r"```python\n(.*?)```", (folder / "README.md").read_text(), re.S).group(1)
+    assert len(code.strip().splitlines()) <= 25
+    blocked = "import sys\nsys.modules['dtd'] = None  # importing dtd would fail here\n"
+    result = subprocess.run(
+        [sys.executable, "-c", blocked + code], capture_output=True, text=True, timeout=300, cwd=folder
+    )
+    assert result.returncode == 0, result.stderr
+    final = json.loads(result.stdout.strip().splitlines()[-1])["achieved_goal"]
+    expected = torch_episode(push_dtd_run if name == "dtd" else reach_run, seed=0)
+    np.testing.assert_allclose(final, expected, atol=1e-4)
+
+
+def test_bad_input_is_one_line(push_dtd_run, tmp_path, exported):
+    config_only = tmp_path / "untrained"
+    config_only.mkdir()
+    (config_only / "config.json").write_text((push_dtd_run / "config.json").read_text())
+    cases = [
+        (["export", config_only, "--out", tmp_path / "a"], "no checkpoint"),
+        (["export", push_dtd_run, "--checkpoint", "newest", "--out", tmp_path / "b"], "no checkpoint named"),
+        (["export", push_dtd_run, "--out", exported["dtd"]], "already exists"),
+    ]
+    for args, message in cases:
+        result = dtd(*args)
+        assert result.returncode == 2 and message in result.stderr, result.stderr
+        assert len(result.stderr.strip().splitlines()) == 1
+    missing = subprocess.run(
+        [sys.executable, "-c", "import sys; sys.modules['onnxruntime'] = None\nfrom dtd.cli import main\n"
+         f"main(['export', {str(push_dtd_run)!r}, '--out', {str(tmp_path / 'c')!r}])"],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert missing.returncode == 2 and "pip install 'dtd[export]'" in missing.stderr
