@@ -18,7 +18,7 @@ from dtd.agents.segments import high_level_input
 from dtd.envs.make import make_env
 from dtd.training.components import close_all
 from dtd.training.rollout import run_many
-from tests.helpers import dtd
+from tests.helpers import TINY, dtd
 
 onnxruntime = pytest.importorskip("onnxruntime", reason="dtd export needs the [export] extra")
 
@@ -153,3 +153,24 @@ def test_bad_input_is_one_line(push_dtd_run, tmp_path, exported):
         capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert missing.returncode == 2 and "pip install 'dtd[export]'" in missing.stderr
+
+
+def test_a_hand_runs_exported_sub_goals_are_poses_in_the_goal_box(tmp_path):
+    run_dir = tmp_path / "hand"
+    args = ["train", "--env", "HandManipulateBlockRotateZ-v1", "--algo", "dtd", "--epochs", "1", *TINY]
+    assert dtd(*args, "--run-dir", run_dir).returncode == 0
+    result = dtd("export", run_dir, "--out", tmp_path / "onnx")
+    assert result.returncode == 0, result.stderr
+    policy = json.loads((tmp_path / "onnx" / "policy.json").read_text())
+    start, stop = policy["goal_quaternion"]
+    rng = np.random.default_rng(0)
+    feeds = {
+        name: rng.normal(0.0, 3.0, (500, width)).astype(np.float32)
+        for name, width in (("observation", policy["obs_dim"]), ("achieved_goal", 7), ("goal", 7))
+    }
+    (subgoals,) = session(tmp_path / "onnx", "high_level").run(None, feeds)
+    np.testing.assert_allclose(np.linalg.norm(subgoals[:, start:stop], axis=1), 1.0, atol=1e-5)
+    low, high = np.array(policy["goal_box"]["low"]), np.array(policy["goal_box"]["high"])
+    assert np.all(subgoals[:, :start] >= low[:start] - 1e-6) and np.all(
+        subgoals[:, :start] <= high[:start] + 1e-6
+    )
