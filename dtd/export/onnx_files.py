@@ -259,13 +259,7 @@ for t in range(policy["horizon"]):
     action = actor.run(None, cast(inputs))[0]
     o, reward, terminated, truncated, info = env.step(action[0])"""
         sessions = 'actor = ort.InferenceSession(policy["models"]["policy"]["file"])'
-    example = f"""import json
-
-import gymnasium as gym
-import gymnasium_robotics
-import numpy as np
-import onnxruntime as ort
-
+    example = f"""import json, gymnasium as gym, gymnasium_robotics, numpy as np, onnxruntime as ort
 gym.register_envs(gymnasium_robotics)
 policy = json.load(open("policy.json"))
 {sessions}
