@@ -22,6 +22,7 @@ def evaluate(
     checkpoint: str = "latest",
     seed: int = 1_000_003,
     show_subgoals: bool = False,
+    save: bool = False,
 ) -> None:
     """Evaluate a trained run with deterministic actions; print one JSON line of figures.
 
@@ -32,10 +33,18 @@ def evaluate(
             flatters), first (after epoch 1), or the path of a checkpoint file of this run.
         seed: Seed of the evaluation episodes (apart from training's).
         show_subgoals: dtd runs: first print each episode's plan, then where the sub-goals lay.
+        save: Also write the JSON line to RUN_DIR/eval-CHECKPOINT.json (eval-latest.json is
+            the final that dtd plot --stats takes for the run's last epoch).
     """
+    from dtd.training.atomic import write_text_atomic
+    from dtd.training.run_dir import CHECKPOINT_NAMES
     from dtd.training.trained_run import evaluate_run
 
     result = evaluate_run(run_dir, episodes, checkpoint, seed, show_subgoals)
+    if save:
+        name = checkpoint if checkpoint in CHECKPOINT_NAMES else Path(checkpoint).stem
+        saved = {key: value for key, value in result.items() if key != "plans"}
+        write_text_atomic(run_dir / f"eval-{name}.json", json.dumps(saved, indent=1) + "\n")
     for number, plan in enumerate(result.pop("plans", []), start=1):
         print(format_plan(number, plan))
     if show_subgoals:

@@ -192,6 +192,7 @@ def plot(
     out: Annotated[Path | None, optional("DIR", "the first RUN_DIR")] = None,
     max_env_steps: Annotated[int | None, optional("STEPS", "every epoch")] = None,
     strict: bool = False,
+    stats: bool = False,
 ) -> None:
     """Draw success against epochs and env steps per environment, and write summary.csv.
 
@@ -204,12 +205,19 @@ def plot(
       dtd plot runs/push-sweep
       dtd plot runs/push-sweep runs/push-sweep-paper --out docs/results/push
       dtd plot runs/pick-sweep --max-env-steps 400000 --out runs/pick-sweep/at-400k
+      dtd plot runs/record --stats
 
     Args:
         run_dirs: Sweep or run directories to read.
         out: Where the figures (PNG and SVG per environment) and summary.csv go.
         max_env_steps: Compare runs at this budget: each curve ends at its last epoch within it.
         strict: Exit with status 1 when a run was left out because its files cannot be read.
+        stats: Also the statistics of final success over seeds (needs dtd[stats]): median,
+            interquartile mean and mean with 95% stratified-bootstrap confidence intervals,
+            the probability that a run beats her's, and performance profiles (rliable); a
+            figure per environment (ENV-stats.png) and columns of summary.csv. A run's final
+            is its saved 100-episode evaluation (dtd eval RUN --episodes 100 --save) where
+            there is one for its last epoch.
     """
     from dtd.experiments.plots import plot as draw_plots
     from dtd.experiments.run_curves import UnreadableRun
@@ -218,7 +226,7 @@ def plot(
         raise DtdError("give at least one directory of runs")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result = draw_plots(run_dirs, out if out is not None else run_dirs[0], max_env_steps)
+        result = draw_plots(run_dirs, out if out is not None else run_dirs[0], max_env_steps, stats)
     for warning in caught:
         print(f"warning: {warning.message}", file=sys.stderr)
     print(result.table)

@@ -17,11 +17,16 @@ import numpy as np
 
 from dtd.errors import RunDirError
 from dtd.experiments.curves import Curve, band
-from dtd.experiments.run_curves import cut_at, find_runs, grouped
+from dtd.experiments.run_curves import colour_of, cut_at, find_runs, grouped
+from dtd.experiments.statistics import (
+    draw_statistics,
+    group_statistics,
+    require_rliable,
+    statistics_columns,
+    statistics_table,
+)
 from dtd.experiments.summary import summaries, summary_csv, summary_table
 from dtd.training.atomic import ensure_writable, write_text_atomic
-
-_COLOURS = {"ddpg": "tab:green", "her": "tab:blue", "dtd": "tab:red"}
 
 
 def draw(env: str, labels: dict[str, list[Curve]], path_stem: Path) -> list[Path]:
@@ -37,8 +42,7 @@ def draw(env: str, labels: dict[str, list[Curve]], path_stem: Path) -> list[Path
     faint = False
     for label, curves in labels.items():
         stats = band(curves)
-        algo = label.split(" ")[0]
-        style = {"color": _COLOURS.get(algo), "linestyle": "--" if "(" in label else "-"}
+        style = {"color": colour_of(label), "linestyle": "--" if "(" in label else "-"}
         for axis, x in zip(axes, (stats.epoch, stats.env_steps), strict=True):
             complete = stats.runs == len(curves)
             name = f"{label} ({len(curves)} seed{'s' if len(curves) != 1 else ''})"
@@ -76,10 +80,14 @@ class PlotResult:
     table: str
 
 
-def plot(directories: Sequence[Path], out: Path, max_env_steps: float | None = None) -> PlotResult:
+def plot(
+    directories: Sequence[Path], out: Path, max_env_steps: float | None = None, stats: bool = False
+) -> PlotResult:
     """Find the runs under ``directories``; write a figure per environment and summary.csv
     into ``out``. With ``max_env_steps``, every run is taken as it was at that budget
-    (:func:`cut_at`), so that runs of different lengths are compared at one."""
+    (:func:`cut_at`), so that runs of different lengths are compared at one. With ``stats``,
+    also the aggregate statistics of final success (:mod:`dtd.experiments.statistics`): a
+    figure per environment (ENV-stats), columns of summary.csv and a table."""
     runs = find_runs(directories)
     if max_env_steps is not None:
         runs = cut_at(runs, max_env_steps)
@@ -89,14 +97,25 @@ def plot(directories: Sequence[Path], out: Path, max_env_steps: float | None = N
             f"no run with a finished epoch{budget} under "
             + ", ".join(str(directory) for directory in directories)
         )
+    if stats:
+        require_rliable()
     ensure_writable(Path(out), "the figures")
     figures = []
     for env, labels in grouped(runs).items():
         figures += draw(env, labels, Path(out) / env.split(":")[-1])
     rows = summaries(runs)
+    extra = None
+    statistics = group_statistics(runs) if stats else []
+    if statistics:
+        extra = statistics_columns(statistics)
+        for env in sorted({group.env for group in statistics}):
+            in_env = [group for group in statistics if group.env == env]
+            figures += draw_statistics(env, in_env, Path(out) / f"{env.split(':')[-1]}-stats")
     csv_path = Path(out) / "summary.csv"
-    write_text_atomic(csv_path, summary_csv(rows))
+    write_text_atomic(csv_path, summary_csv(rows, extra))
     table = summary_table(rows)
+    if statistics:
+        table += "\n\n" + statistics_table(statistics)
     if max_env_steps is not None:
         table += f"\nevery run as it was at {max_env_steps:,.0f} env steps (--max-env-steps)"
     return PlotResult(figures, csv_path, table)

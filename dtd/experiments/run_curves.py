@@ -27,6 +27,8 @@ class RunCurve:
     label: str
     """The algorithm, with `` (preset)`` where the preset is not the tuned default."""
     curve: Curve
+    test_episodes: int = 10
+    """Evaluation episodes behind each epoch's eval success."""
 
 
 def find_runs(directories: Sequence[Path]) -> list[RunCurve]:
@@ -56,7 +58,7 @@ def find_runs(directories: Sequence[Path]) -> list[RunCurve]:
         label = config.algo.value
         if config.preset is not Preset.tuned:
             label += f" ({config.preset.value})"
-        run = RunCurve(run_dir, config.env or "?", label, curve)
+        run = RunCurve(run_dir, config.env or "?", label, curve, config.test_episodes)
         trial = dataclasses.replace(config, epochs=0, collector=Collection.auto)
         if trial in trials:
             kept, dropped = sorted([trials[trial], run], key=lambda r: len(r.curve), reverse=True)
@@ -73,7 +75,7 @@ def find_runs(directories: Sequence[Path]) -> list[RunCurve]:
 def grouped(runs: Sequence[RunCurve]) -> dict[str, dict[str, list[Curve]]]:
     """Curves by environment, then by label (both in sorted order)."""
     groups: dict[str, dict[str, list[Curve]]] = {}
-    for run in sorted(runs, key=lambda run: (run.env, _label_order(run.label), str(run.run_dir))):
+    for run in sorted(runs, key=lambda run: (run.env, label_order(run.label), str(run.run_dir))):
         groups.setdefault(run.env, {}).setdefault(run.label, []).append(run.curve)
     return groups
 
@@ -87,6 +89,15 @@ def cut_at(runs: Sequence[RunCurve], env_steps: float) -> list[RunCurve]:
     return [run for run in cut if len(run.curve) > 0]
 
 
-def _label_order(label: str) -> tuple[int, str]:
+_COLOURS = {"ddpg": "tab:green", "her": "tab:blue", "dtd": "tab:red"}
+
+
+def colour_of(label: str) -> str | None:
+    """The colour of an algorithm's label in every figure (None: matplotlib's next)."""
+    return _COLOURS.get(label.split(" ")[0])
+
+
+def label_order(label: str) -> tuple[int, str]:
+    """ddpg, her, dtd, then any other label; presets after the tuned default."""
     order = {"ddpg": 0, "her": 1, "dtd": 2}
     return order.get(label.split(" ")[0], 3), label

@@ -78,15 +78,21 @@ def summaries(runs: Sequence[RunCurve]) -> list[GroupSummary]:
     ]
 
 
-def summary_csv(rows: Sequence[GroupSummary]) -> str:
+def summary_csv(
+    rows: Sequence[GroupSummary],
+    extra: tuple[list[str], dict[tuple[str, str], list[str]]] | None = None,
+) -> str:
     """The summary as CSV text: one row per group; ``inf`` where the median run (or a
-    quartile) never reached the level."""
+    quartile) never reached the level. ``extra``: more columns (names, and cells per
+    (environment, label)), e.g. the statistics of ``dtd plot --stats``."""
     header = ["env", "algo", "runs", "epochs_min", "epochs_max"]
     header += ["final_success_median", "final_success_q25", "final_success_q75"]
     for level in LEVELS:
         header += [f"reached_{level}"]
         header += [f"env_steps_to_{level}_{stat}" for stat in ("median", "q25", "q75")]
         header += [f"wall_s_to_{level}_{stat}" for stat in ("median", "q25", "q75")]
+    if extra is not None:
+        header += extra[0]
     lines = [",".join(header)]
     for row in rows:
         cells: list[object] = [row.env, row.label, row.runs, row.epochs_min, row.epochs_max]
@@ -95,6 +101,8 @@ def summary_csv(rows: Sequence[GroupSummary]) -> str:
             cells.append(row.reached[level])
             cells += _spread_cells(row.steps_to[level], "{:.0f}")
             cells += _spread_cells(row.wall_to[level], "{:.1f}")
+        if extra is not None:
+            cells += extra[1].get((row.env, row.label), [""] * len(extra[0]))
         lines.append(",".join(map(str, cells)))
     return "\n".join(lines) + "\n"
 

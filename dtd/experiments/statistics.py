@@ -1,0 +1,255 @@
+"""Aggregate statistics of final success over seeds, with confidence intervals, computed by
+``rliable`` (Agarwal et al., 2021): per environment and algorithm the median of the runs, the
+interquartile mean (IQM) and the mean with 95% stratified-bootstrap confidence intervals; the
+probability that one algorithm's run beats another's; and performance profiles (the share of
+runs whose final success exceeds each threshold).
+
+A run's final success is its 100-episode evaluation when one was saved for its last epoch
+(``dtd eval RUN --episodes 100 --save`` writes ``RUN/eval-latest.json``), else the last
+epoch's evaluation in metrics.csv (over ``--test-episodes`` episodes, noisier); each group says
+which it used.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from dtd.errors import DtdError
+from dtd.experiments.run_curves import RunCurve, colour_of, label_order
+
+BOOTSTRAP_REPS = 10_000
+"""Bootstrap replications of each confidence interval."""
+CONFIDENCE = 0.95
+SEED = 0
+"""Seed of the bootstrap, so that the same runs give the same intervals."""
+SAVED_EVALUATION = "eval-latest.json"
+"""What ``dtd eval RUN --save`` writes for the latest checkpoint."""
+PROFILE_REPS = 2_000
+"""Bootstrap replications of the performance profiles' bands."""
+THRESHOLDS = np.linspace(0.0, 1.0, 51)
+"""Success thresholds of the performance profiles."""
+BASELINE = "her"
+"""The algorithm others are compared with (probability of improvement)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Interval:
+    """A point estimate and its confidence interval."""
+
+    estimate: float
+    low: float
+    high: float
+
+    def text(self) -> str:
+        return f"{self.estimate:.2f} [{self.low:.2f}, {self.high:.2f}]"
+
+
+@dataclasses.dataclass(frozen=True)
+class GroupStatistics:
+    """The statistics of one (environment, algorithm) group's final successes."""
+
+    env: str
+    label: str
+    scores: np.ndarray
+    """Each run's final success."""
+    episodes: list[int]
+    """How many evaluation episodes each run's final success counts."""
+    median: Interval
+    iqm: Interval
+    mean: Interval
+    improvement: dict[str, Interval]
+    """P(a run of this group beats a run of the named group), for the baseline."""
+
+
+def require_rliable() -> None:
+    try:
+        import rliable  # noqa: F401
+    except ImportError as exc:
+        raise DtdError("--stats needs rliable, which is not installed: pip install 'dtd[stats]'") from exc
+
+
+def final_success(run: RunCurve) -> tuple[float, int]:
+    """A run's final success and the number of episodes behind it: its saved evaluation of
+    the last epoch when there is one, else the last epoch's row of metrics.csv."""
+    saved = run.run_dir / SAVED_EVALUATION
+    last_epoch = int(run.curve.epoch[-1])
+    if saved.is_file():
+        try:
+            evaluation = json.loads(saved.read_text())
+            if int(evaluation["epoch"]) == last_epoch:
+                return float(evaluation["success_rate"]), int(evaluation["episodes"])
+        except (ValueError, KeyError, TypeError):
+            pass
+    return float(run.curve.final_success), int(run.test_episodes)
+
+
+def group_statistics(runs: Sequence[RunCurve]) -> list[GroupStatistics]:
+    """Statistics per (environment, algorithm) of the runs' final successes."""
+    require_rliable()
+    groups: dict[tuple[str, str], list[RunCurve]] = {}
+    for run in runs:
+        groups.setdefault((run.env, run.label), []).append(run)
+    finals = {key: [final_success(run) for run in members] for key, members in groups.items()}
+    with warnings.catch_warnings():
+        # arch (rliable's bootstrap) announces a change of its own default generator.
+        warnings.simplefilter("ignore", FutureWarning)
+        result = [
+            GroupStatistics(
+                env,
+                label,
+                _scores(values),
+                [count for _, count in values],
+                *_aggregates(label, _scores(values)),
+                _improvement(label, _scores(values), finals.get((env, BASELINE))),
+            )
+            for (env, label), values in finals.items()
+        ]
+    return sorted(result, key=lambda group: (group.env, label_order(group.label)))
+
+
+def _scores(finals: Sequence[tuple[float, int]]) -> np.ndarray:
+    return np.array([value for value, _ in finals])
+
+
+def _aggregates(label: str, scores: np.ndarray) -> list[Interval]:
+    """Median, IQM and mean of ``scores`` with their intervals."""
+    from rliable import library, metrics
+
+    def estimates(matrix: np.ndarray) -> np.ndarray:
+        # The median of the runs' finals: rliable's aggregate median is one over tasks of the
+        # tasks' means, which for one task per environment is the mean.
+        return np.array([np.median(matrix), metrics.aggregate_iqm(matrix), metrics.aggregate_mean(matrix)])
+
+    points, intervals = library.get_interval_estimates(
+        {label: scores[:, None]}, estimates, reps=BOOTSTRAP_REPS, random_state=np.random.RandomState(SEED)
+    )
+    return [
+        Interval(float(points[label][i]), float(intervals[label][0, i]), float(intervals[label][1, i]))
+        for i in range(3)
+    ]
+
+
+def _improvement(
+    label: str, scores: np.ndarray, baseline: Sequence[tuple[float, int]] | None
+) -> dict[str, Interval]:
+    """P(a run of ``label`` beats one of the baseline), where there is a baseline to beat."""
+    from rliable import library, metrics
+
+    if baseline is None or label.split(" ")[0] == BASELINE:
+        return {}
+    pair = f"{label},{BASELINE}"
+    points, intervals = library.get_interval_estimates(
+        {pair: (scores[:, None], _scores(baseline)[:, None])},
+        metrics.probability_of_improvement,
+        reps=BOOTSTRAP_REPS,
+        random_state=np.random.RandomState(SEED),
+    )
+    estimate = float(np.ravel(points[pair])[0])
+    return {BASELINE: Interval(estimate, float(intervals[pair][0, 0]), float(intervals[pair][1, 0]))}
+
+
+def performance_profiles(groups: Sequence[GroupStatistics]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per label, the share of runs whose final success exceeds each of :data:`THRESHOLDS`
+    and its confidence band (2 x thresholds); for one environment's groups."""
+    from rliable import library
+
+    scores = {group.label: group.scores[:, None] for group in groups}
+    saved = np.random.get_state()
+    np.random.seed(SEED)  # create_performance_profile bootstraps with numpy's global generator
+    try:
+        profiles, bands = library.create_performance_profile(scores, THRESHOLDS, reps=PROFILE_REPS)
+    finally:
+        np.random.set_state(saved)
+    return {label: (profiles[label], bands[label]) for label in profiles}
+
+
+def statistics_columns(
+    groups: Sequence[GroupStatistics],
+) -> tuple[list[str], dict[tuple[str, str], list[str]]]:
+    """Columns for summary.csv: their names, and per (environment, label) their cells."""
+    header = ["final_episodes_min", "final_episodes_max", "final_success_per_run"]
+    for name in ("median", "iqm", "mean"):
+        header += [f"final_{name}", f"final_{name}_ci_low", f"final_{name}_ci_high"]
+    header += [f"p_improvement_over_{BASELINE}", "p_improvement_ci_low", "p_improvement_ci_high"]
+    cells = {}
+    for group in groups:
+        row = [str(min(group.episodes)), str(max(group.episodes))]
+        row.append(" ".join(f"{score:.3f}" for score in group.scores))
+        for interval in (group.median, group.iqm, group.mean):
+            row += [f"{interval.estimate:.4f}", f"{interval.low:.4f}", f"{interval.high:.4f}"]
+        poi = group.improvement.get(BASELINE)
+        row += [f"{poi.estimate:.4f}", f"{poi.low:.4f}", f"{poi.high:.4f}"] if poi else ["", "", ""]
+        cells[(group.env, group.label)] = row
+    return header, cells
+
+
+def statistics_table(groups: Sequence[GroupStatistics]) -> str:
+    """The statistics as aligned text."""
+    heads = ["env", "algo", "runs", "final from", "median", "IQM", "mean", f"P(better than {BASELINE})"]
+    table = [heads]
+    for group in groups:
+        lowest, highest = min(group.episodes), max(group.episodes)
+        source = f"{lowest} episodes" if lowest == highest else f"{lowest}-{highest} episodes"
+        poi = group.improvement.get(BASELINE)
+        table.append(
+            [group.env, group.label, str(len(group.scores)), source]
+            + [interval.text() for interval in (group.median, group.iqm, group.mean)]
+            + [poi.text() if poi else "-"]
+        )
+    widths = [max(len(line[column]) for line in table) for column in range(len(heads))]
+    text = ["  ".join(cell.ljust(width) for cell, width in zip(line, widths, strict=True)) for line in table]
+    text.append(
+        f"final success over seeds: estimate [{CONFIDENCE:.0%} stratified-bootstrap CI, {BOOTSTRAP_REPS:,} "
+        "replications] (rliable); final from: the episodes of the evaluation each run's final comes from"
+    )
+    return "\n".join(text)
+
+
+def draw_statistics(env: str, groups: Sequence[GroupStatistics], path_stem: Path) -> list[Path]:
+    """One environment's aggregates with their intervals and its performance profiles, as PNG
+    and SVG beside ``path_stem``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axes = plt.subplots(1, 4, figsize=(16, 3.8), layout="constrained")
+    for axis, name in zip(axes[:3], ("median", "iqm", "mean"), strict=True):
+        for row, group in enumerate(groups):
+            interval = getattr(group, name)
+            colour = colour_of(group.label)
+            axis.barh(
+                row, interval.high - interval.low, left=interval.low, height=0.6, color=colour, alpha=0.5
+            )
+            axis.plot([interval.estimate] * 2, [row - 0.3, row + 0.3], color=colour, linewidth=2)
+        axis.set_yticks(range(len(groups)), [f"{g.label} ({len(g.scores)})" for g in groups])
+        axis.set_xlim(-0.02, 1.02)
+        axis.set_title({"iqm": "IQM"}.get(name, name))
+        axis.set_xlabel("final success")
+        axis.grid(axis="x", alpha=0.3)
+    profiles = performance_profiles(groups)
+    for group in groups:
+        profile, band = profiles[group.label]
+        colour = colour_of(group.label)
+        axes[3].plot(THRESHOLDS, profile, color=colour, label=group.label)
+        axes[3].fill_between(THRESHOLDS, band[0], band[1], color=colour, alpha=0.2, linewidth=0)
+    axes[3].set_xlabel("final success threshold")
+    axes[3].set_ylabel("share of runs above it")
+    axes[3].set_title("performance profile")
+    axes[3].legend(loc="lower left")
+    axes[3].grid(alpha=0.3)
+    figure.suptitle(f"{env}: final success over seeds, {CONFIDENCE:.0%} stratified-bootstrap CIs (rliable)")
+    path_stem.parent.mkdir(parents=True, exist_ok=True)
+    written = []
+    for suffix in (".png", ".svg"):
+        path = path_stem.with_suffix(suffix)
+        figure.savefig(path, dpi=120)
+        written.append(path)
+    plt.close(figure)
+    return written
