@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 
 import pytest
@@ -32,3 +33,18 @@ def test_plot_draws_the_readable_runs_and_names_the_others(tmp_path, reach_run):
 
     strict = dtd("plot", tmp_path / "runs", "--out", tmp_path / "figures", "--strict")
     assert strict.returncode == 1 and (tmp_path / "figures" / "summary.csv").is_file()
+
+
+def test_a_saved_evaluation_is_the_final_plot_stats_takes(tmp_path, reach_run):
+    pytest.importorskip("rliable", reason="dtd plot --stats needs the [stats] extra")
+    run = shutil.copytree(reach_run, tmp_path / "runs" / "reach")
+    result = dtd("eval", run, "--episodes", "4", "--save")
+    assert result.returncode == 0, result.stderr
+    saved = json.loads((run / "eval-latest.json").read_text())
+    assert saved["episodes"] == 4 and saved["epoch"] == 3
+    assert saved == {k: v for k, v in json.loads(result.stdout.splitlines()[-1]).items() if k != "plans"}
+    result = dtd("plot", tmp_path / "runs", "--stats", "--out", tmp_path / "figures")
+    assert result.returncode == 0, result.stderr
+    assert "4 episodes" in result.stdout and "IQM" in result.stdout
+    assert not [line for line in result.stderr.splitlines() if line.startswith("warning")]
+    assert (tmp_path / "figures" / "FetchReach-v4-stats.png").is_file()
