@@ -36,15 +36,11 @@ def evaluate(
         save: Also write the JSON line to RUN_DIR/eval-CHECKPOINT.json (eval-latest.json is
             the final that dtd plot --stats takes for the run's last epoch).
     """
-    from dtd.training.atomic import write_text_atomic
-    from dtd.training.run_dir import CHECKPOINT_NAMES
-    from dtd.training.trained_run import evaluate_run
+    from dtd.training.trained_run import evaluate_run, save_evaluation
 
     result = evaluate_run(run_dir, episodes, checkpoint, seed, show_subgoals)
     if save:
-        name = checkpoint if checkpoint in CHECKPOINT_NAMES else Path(checkpoint).stem
-        saved = {key: value for key, value in result.items() if key != "plans"}
-        write_text_atomic(run_dir / f"eval-{name}.json", json.dumps(saved, indent=1) + "\n")
+        save_evaluation(result, run_dir, checkpoint)
     for number, plan in enumerate(result.pop("plans", []), start=1):
         print(format_plan(number, plan))
     if show_subgoals:

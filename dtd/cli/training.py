@@ -137,6 +137,7 @@ def sweep(
     workers: int = 0,
     ray: Annotated[str | None, optional("ADDRESS", "local processes")] = None,
     progress: bool = True,
+    final_episodes: int = 0,
 ) -> None:
     """Train every (algorithm, seed) pair of one configuration, each into OUT/<env>-<algo>-s<seed>.
 
@@ -151,6 +152,7 @@ def sweep(
       dtd sweep --env FetchPush-v4 --algos ddpg,her,dtd --seeds 5 --epochs 50 --out runs/push-sweep
       dtd sweep --env FetchPush-v4 --preset paper --seeds 3 --out runs/push-sweep-paper
       dtd sweep --env FetchPush-v4 --seeds 5 --out /shared/push-sweep --ray auto
+      dtd sweep --env FetchPush-v4 --seed 100 --seeds 5 --final-episodes 100 --out runs/record/push
       dtd plot runs/push-sweep
 
     Args:
@@ -161,6 +163,9 @@ def sweep(
         workers: Local trials at once (0: one per core); they share the cores' torch threads.
         ray: Run on Ray instead: auto, local or a cluster address (needs pip install 'dtd[ray]').
         progress: Show a live progress bar.
+        final_episodes: Once a trial is trained, evaluate its last checkpoint over this many
+            episodes and save it (RUN/eval-latest.json, the final dtd plot --stats takes);
+            0: none. Run again, a saved evaluation of the last epoch is kept.
     """
     from dtd.config import Algo
     from dtd.errors import ConfigError
@@ -173,7 +178,7 @@ def sweep(
         chosen = [Algo(name.strip()) for name in algos.split(",") if name.strip()]
     except ValueError as exc:
         raise ConfigError(f"--algos: {exc}; choose from {', '.join(a.value for a in Algo)}") from exc
-    trials = sweep_trials(config, chosen, seeds, out)
+    trials = sweep_trials(config, chosen, seeds, out, final_episodes)
     ensure_writable(out, "the sweep's runs")
     outcomes = run_sweep(trials, workers=workers, ray_address=ray, show_progress=progress)
     failed = [outcome for outcome in outcomes if not outcome.ok]

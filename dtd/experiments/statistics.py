@@ -22,14 +22,13 @@ import numpy as np
 
 from dtd.errors import DtdError
 from dtd.experiments.run_curves import RunCurve, colour_of, label_order
+from dtd.training.trained_run import FINAL_EVALUATION
 
 BOOTSTRAP_REPS = 10_000
 """Bootstrap replications of each confidence interval."""
 CONFIDENCE = 0.95
 SEED = 0
 """Seed of the bootstrap, so that the same runs give the same intervals."""
-SAVED_EVALUATION = "eval-latest.json"
-"""What ``dtd eval RUN --save`` writes for the latest checkpoint."""
 PROFILE_REPS = 2_000
 """Bootstrap replications of the performance profiles' bands."""
 THRESHOLDS = np.linspace(0.0, 1.0, 51)
@@ -77,7 +76,7 @@ def require_rliable() -> None:
 def final_success(run: RunCurve) -> tuple[float, int]:
     """A run's final success and the number of episodes behind it: its saved evaluation of
     the last epoch when there is one, else the last epoch's row of metrics.csv."""
-    saved = run.run_dir / SAVED_EVALUATION
+    saved = run.run_dir / FINAL_EVALUATION
     last_epoch = int(run.curve.epoch[-1])
     if saved.is_file():
         try:

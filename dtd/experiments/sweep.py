@@ -28,22 +28,27 @@ def trial_name(config: TrainConfig) -> str:
     return f"{env}-{config.algo.value}-s{config.seed}"
 
 
-def sweep_trials(base: TrainConfig, algos: Sequence[Algo], seeds: int, out: Path) -> list[Trial]:
+def sweep_trials(
+    base: TrainConfig, algos: Sequence[Algo], seeds: int, out: Path, final_episodes: int = 0
+) -> list[Trial]:
     """Trials of ``base`` for each algorithm and ``seeds`` seeds from ``base.seed``; ordered seed
-    by seed, so that the first results hold every algorithm."""
+    by seed, so that the first results hold every algorithm. With ``final_episodes``, each
+    trial's last checkpoint is evaluated over that many episodes once it is trained."""
     if not algos:
         raise ConfigError("--algos names no algorithm")
     if len(set(algos)) != len(algos):
         raise ConfigError(f"--algos names an algorithm twice: {','.join(a.value for a in algos)}")
     if seeds < 1:
         raise ConfigError(f"--seeds must be at least 1, got {seeds}")
+    if final_episodes < 0:
+        raise ConfigError(f"--final-episodes must be 0 (none) or more, got {final_episodes}")
     root = trials_root(out)
     trials = []
     for seed in range(base.seed, base.seed + seeds):
         for algo in algos:
             config = dataclasses.replace(base, algo=algo, seed=seed)
             config.validate()
-            trials.append(Trial(config, root / trial_name(config)))
+            trials.append(Trial(config, root / trial_name(config), final_episodes))
     return trials
 
 

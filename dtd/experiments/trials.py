@@ -35,6 +35,9 @@ class Trial:
 
     config: TrainConfig
     run_dir: Path
+    final_episodes: int = 0
+    """Evaluate the last checkpoint over this many episodes once trained (0: not), saved as
+    RUN/eval-latest.json (:func:`dtd.training.trained_run.final_evaluation`)."""
 
     @property
     def name(self) -> str:
@@ -77,6 +80,7 @@ def sharing_cores(config: TrainConfig, workers: int, cores: int) -> TrainConfig:
 def run_trial(trial: Trial) -> TrialOutcome:
     """Train ``trial`` to its last epoch (resuming, or leaving a finished run); never raises."""
     from dtd.training.lifecycle import train_to_end
+    from dtd.training.trained_run import final_evaluation
 
     start = time.perf_counter()
     try:
@@ -84,6 +88,8 @@ def run_trial(trial: Trial) -> TrialOutcome:
         # Each trial's epoch lines and warnings go to its own log, not into the sweep's display.
         with open(trial.run_dir / LOG_NAME, "a") as log, contextlib.redirect_stderr(log):
             train_to_end(trial.config, trial.run_dir)
+            if trial.final_episodes:
+                final_evaluation(trial.run_dir, trial.final_episodes)
     except Exception:
         return TrialOutcome(trial, traceback.format_exc(), time.perf_counter() - start)
     return TrialOutcome(trial, None, time.perf_counter() - start)

@@ -4,6 +4,7 @@ deterministic evaluation episodes of it."""
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 from typing import Any
 
@@ -13,10 +14,11 @@ from dtd.agents.dot_to_dot import DotToDotAgent
 from dtd.agents.interface import Agent
 from dtd.config import Algo, Collection, TrainConfig
 from dtd.errors import ConfigError
+from dtd.training.atomic import write_text_atomic
 from dtd.training.checkpoint import check_checkpoint, load_checkpoint, restoring
 from dtd.training.components import Components, build, close_all
 from dtd.training.rollout import episode_figures, run_many
-from dtd.training.run_dir import RunDir, read_config
+from dtd.training.run_dir import CHECKPOINT_NAMES, RunDir, read_config
 
 
 @dataclasses.dataclass
@@ -32,6 +34,8 @@ class LoadedRun:
 
 EVAL_SEED = 1_000_003
 """Seed of evaluation episodes after training, apart from every seed a run trains with."""
+FINAL_EVALUATION = "eval-latest.json"
+"""The saved evaluation of a run's latest checkpoint (``dtd eval --save``), its final of record."""
 
 
 def load_run(
@@ -109,3 +113,32 @@ def evaluate_run(
         if show_subgoals:
             result["plans"] = components.agent.plan(played)
     return result
+
+
+def saved_evaluation_path(run_dir: Path | str, checkpoint: str = "latest") -> Path:
+    """Where ``dtd eval --save`` keeps the evaluation of ``checkpoint``: RUN/eval-NAME.json."""
+    name = checkpoint if checkpoint in CHECKPOINT_NAMES else Path(checkpoint).stem
+    return Path(run_dir) / f"eval-{name}.json"
+
+
+def save_evaluation(result: dict[str, Any], run_dir: Path | str, checkpoint: str = "latest") -> Path:
+    """Write an :func:`evaluate_run` result (without its plans) beside the run, atomically."""
+    path = saved_evaluation_path(run_dir, checkpoint)
+    kept = {key: value for key, value in result.items() if key != "plans"}
+    write_text_atomic(path, json.dumps(kept, indent=1) + "\n")
+    return path
+
+
+def final_evaluation(run_dir: Path | str, episodes: int) -> Path:
+    """The run's latest checkpoint evaluated over ``episodes`` episodes and saved, unless an
+    evaluation of that epoch over at least as many episodes is saved already."""
+    path = saved_evaluation_path(run_dir)
+    epoch = load_checkpoint(RunDir(Path(run_dir)).latest)["state"]["epoch"]
+    if path.is_file():
+        try:
+            saved = json.loads(path.read_text())
+            if saved.get("epoch") == epoch and saved.get("episodes", 0) >= episodes:
+                return path
+        except ValueError:
+            pass
+    return save_evaluation(evaluate_run(run_dir, episodes), run_dir)

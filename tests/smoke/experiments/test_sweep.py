@@ -3,6 +3,7 @@ rest), failures that do not stop the others, the same trials on a local Ray."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -122,3 +123,17 @@ def test_the_same_trials_run_as_ray_tasks(tmp_path):
     assert [outcome.error for outcome in outcomes] == [None, None]
     assert all(epochs_recorded(trial.run_dir) == 1 for trial in trials)
     assert Path(trials[0].run_dir, "train.log").read_text().count("epoch 1/1") == 1
+
+
+def test_trials_are_evaluated_once_trained_and_not_again(tmp_path):
+    trial = Trial(tiny_config(algo=Algo.her), tmp_path / "evaluated", final_episodes=3)
+    (outcome,) = run_local([trial], workers=1)
+    assert outcome.ok, outcome.error
+    saved = trial.run_dir / "eval-latest.json"
+    evaluation = json.loads(saved.read_text())
+    assert evaluation["episodes"] == 3 and evaluation["epoch"] == 1 and 0 <= evaluation["success_rate"] <= 1
+    written = saved.stat().st_mtime_ns
+    (outcome,) = run_local([trial], workers=1)
+    assert outcome.ok and saved.stat().st_mtime_ns == written
+    result = dtd(*SWEEP, "--final-episodes", "-1", "--out", tmp_path / "refused")
+    assert result.returncode == 2 and "--final-episodes" in result.stderr
