@@ -17,6 +17,7 @@ import numpy as np
 
 from dtd.errors import RunDirError
 from dtd.experiments.curves import Curve, band
+from dtd.experiments.figures import save_figure
 from dtd.experiments.run_curves import colour_of, cut_at, find_runs, grouped
 from dtd.experiments.statistics import (
     draw_statistics,
@@ -63,14 +64,7 @@ def draw(env: str, labels: dict[str, list[Curve]], path_stem: Path) -> list[Path
     axes[0].legend(loc="upper left")
     note = " (faint: past the shortest run, over fewer seeds)" if faint else ""
     figure.suptitle(f"{env}: mean over seeds, band = 25th-75th percentile{note}")
-    path_stem.parent.mkdir(parents=True, exist_ok=True)
-    written = []
-    for suffix in (".png", ".svg"):
-        path = path_stem.with_suffix(suffix)
-        figure.savefig(path, dpi=120)
-        written.append(path)
-    plt.close(figure)
-    return written
+    return save_figure(figure, path_stem)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from dtd.errors import DtdError
+from dtd.experiments.figures import save_figure
 from dtd.experiments.run_curves import RunCurve, colour_of, label_order
 from dtd.training.trained_run import FINAL_EVALUATION
 
@@ -244,11 +245,4 @@ def draw_statistics(env: str, groups: Sequence[GroupStatistics], path_stem: Path
     axes[3].legend(loc="lower left")
     axes[3].grid(alpha=0.3)
     figure.suptitle(f"{env}: final success over seeds, {CONFIDENCE:.0%} stratified-bootstrap CIs (rliable)")
-    path_stem.parent.mkdir(parents=True, exist_ok=True)
-    written = []
-    for suffix in (".png", ".svg"):
-        path = path_stem.with_suffix(suffix)
-        figure.savefig(path, dpi=120)
-        written.append(path)
-    plt.close(figure)
-    return written
+    return save_figure(figure, path_stem)
