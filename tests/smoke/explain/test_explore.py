@@ -29,6 +29,7 @@ from dtd.explain.heatmap import place_block_and_goal
 from dtd.training.checkpoint import load_checkpoint
 from dtd.training.components import build, close_all
 from dtd.training.run_dir import RunDir, read_config, write_config
+from tests.helpers import TINY, dtd
 
 pytest.importorskip("fastapi", reason="dtd explore needs the [explore] extra")
 
@@ -345,3 +346,20 @@ def test_the_page_follows_a_dragged_block_the_epoch_slider_and_plays_an_episode(
         finally:
             browser.close()
     assert errors == []
+
+
+def test_pick_and_place_maps_a_slice_at_any_height_with_the_goal_in_the_air(tmp_path):
+    run_dir = tmp_path / "pick"
+    args = ["train", "--env", "FetchPickAndPlace-v4", "--algo", "dtd", "--epochs", "1", *TINY]
+    assert dtd(*args, "--run-dir", run_dir).returncode == 0
+    with explorer(run_dir) as (url, _):
+        status, run = get(url + "api/run")
+        assert status == 200 and run["goal_in_air"] and run["map"]
+        table_z = run["table"]["block_z"]
+        _, low = get(map_url(url, 1, goal_z=table_z + 0.2))
+        _, high = get(map_url(url, 1, goal_z=table_z + 0.2, z=table_z + 0.3))
+        assert low["z"] == pytest.approx(table_z) and high["z"] == pytest.approx(table_z + 0.3)
+        assert low["goal"][2] == pytest.approx(table_z + 0.2)
+        assert low["values"] != high["values"]
+        status, answer = get(map_url(url, 1, goal_z=table_z + 0.9))
+        assert status == 422 and "goal's z" in answer["error"]
