@@ -250,7 +250,10 @@ class Explorer:
         if snapshot is None:
             kept = ", ".join(map(str, snapshots)) or "none yet"
             raise ExploreError(404, f"no snapshot of epoch {epoch} in this run (epochs kept: {kept})")
-        key = (snapshot.path, snapshot.path.stat().st_mtime_ns)
+        try:
+            key = (snapshot.path, snapshot.path.stat().st_mtime_ns)
+        except OSError as exc:  # removed since it was listed (a run started again with --force)
+            raise ExploreError(404, f"the snapshot of epoch {epoch} is gone ({exc.strerror})") from exc
         if key not in self.states:
             stored = load_checkpoint(snapshot.path)
             check_checkpoint(stored, self.config, self.spec, snapshot.path)
