@@ -301,7 +301,10 @@ class Explorer:
         if len(lines) < 2:
             return None
         row = dict(zip(lines[0].split(","), lines[-1].split(","), strict=False))
-        return {"epoch": int(row["epoch"]), "env_steps": int(row["env_steps"])}
+        try:
+            return {"epoch": int(row["epoch"]), "env_steps": int(row["env_steps"])}
+        except (KeyError, ValueError):  # not a metrics file dtd wrote: say nothing of progress
+            return None
 
     def _forget_old_videos(self) -> None:
         videos = sorted(self.videos.glob("episode-*.mp4"), key=lambda path: path.stat().st_mtime_ns)
