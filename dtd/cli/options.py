@@ -87,9 +87,25 @@ def reflowed(docstring: str) -> str:
     out = []
     for block in blocks:
         lines = block.splitlines()
+        if lines[0] == "Args:":
+            out.append("\n".join(_joined_arguments(lines)))
+            continue
         indented = any(line.startswith(" ") for line in lines[1:]) or lines[0].endswith(":")
         out.append(block if indented else " ".join(line.strip() for line in lines))
     return "\n\n".join(out)
+
+
+def _joined_arguments(lines: list[str]) -> list[str]:
+    """An ``Args:`` block with each argument's text on one line: a line indented deeper than
+    the arguments' names continues the one before (tyro would keep its line break)."""
+    names = min((len(line) - len(line.lstrip()) for line in lines[1:] if line.strip()), default=0)
+    joined = lines[:1]
+    for line in lines[1:]:
+        if len(line) - len(line.lstrip()) > names and len(joined) > 1:
+            joined[-1] += " " + line.strip()
+        else:
+            joined.append(line)
+    return joined
 
 
 def options_class(

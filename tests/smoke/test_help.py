@@ -12,7 +12,7 @@ import pytest
 
 pytestmark = pytest.mark.smoke
 
-COMMANDS = ("train", "sweep", "plot", "eval", "render", "heatmap", "report")
+COMMANDS = ("train", "sweep", "plot", "eval", "render", "heatmap", "report", "explore", "export")
 
 
 def run(*args: str) -> subprocess.CompletedProcess[str]:
