@@ -10,6 +10,7 @@ methods touch the simulator and the renderer, so they are called from one thread
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import itertools
 import time
@@ -86,19 +87,21 @@ class Explorer:
         self.states: OrderedDict[tuple[Path, int], tuple[dict[str, Any], dict[str, Any]]] = OrderedDict()
         self.loaded: tuple[Path, int] | None = None
         self.renderer = None
-        self.table: Table | None = None
+        self.placement_table: Table | None = None
+        """The table of a Fetch block task, where the block and the goal can be placed."""
+        with contextlib.suppress(EnvError):
+            self.placement_table = table_of(self.env)
+        self.table = self.placement_table if self.config.algo is Algo.dtd else None
+        """The table the high level's values are mapped over (a dtd run on a Fetch block task)."""
         self.no_map_reason = ""
         if self.config.algo is not Algo.dtd:
             self.no_map_reason = f"a {self.config.algo.value} run has no high level to map"
-        else:
-            try:
-                self.table = table_of(self.env)
-            except EnvError:
-                self.no_map_reason = (
-                    "this task's goal is not a point on a table (for the Hand tasks it is the "
-                    "block's orientation, a unit quaternion), so there is no table to map the "
-                    "high level's values over; its plans and videos show what it asks for"
-                )
+        elif self.table is None:
+            self.no_map_reason = (
+                "this task's goal is not a point on a table (for the Hand tasks it is the "
+                "block's orientation, a unit quaternion), so there is no table to map the "
+                "high level's values over; its plans and videos show what it asks for"
+            )
         self.legacy = self._legacy_checkpoints()
 
     # -- what there is to see ------------------------------------------------------------
@@ -118,7 +121,7 @@ class Explorer:
             "epochs": [snapshot.epoch for snapshot in epochs],
             "map": self.table is not None,
             "no_map_reason": self.no_map_reason,
-            "placeable": self._placeable(),
+            "placeable": self.placement_table is not None,
             "resolution": MAP_RESOLUTION,
             "progress": self._progress(),
         }
@@ -127,8 +130,9 @@ class Explorer:
                 "no epoch has finished yet: the run keeps a snapshot of its agent after each epoch "
                 "(checkpoints/epochs/), and the page shows them as they appear"
             )
-        if self.table is not None:
-            info["table"] = {"x": self.table.x, "y": self.table.y, "block_z": self.table.block_z}
+        if self.placement_table is not None:
+            table = self.placement_table
+            info["table"] = {"x": table.x, "y": table.y, "block_z": table.block_z}
             info["goal_in_air"] = bool(getattr(self.env.unwrapped, "target_in_the_air", False))
         return info
 
@@ -191,7 +195,7 @@ class Explorer:
         snapshot = self._use_epoch(epoch)
         env = self.env
         if block is not None or goal is not None:
-            if not self._placeable():
+            if self.placement_table is None:
                 raise ExploreError(409, "this task's block and goal cannot be placed by hand")
             if block is None or goal is None:
                 raise ExploreError(422, "give both the block and the goal, or neither")
@@ -217,19 +221,10 @@ class Explorer:
         close_all(self.components)
 
     # -- inside ----------------------------------------------------------------------------
-    def _placeable(self) -> bool:
-        return self.table is not None or (self.config.algo is not Algo.dtd and self._has_table())
-
-    def _has_table(self) -> bool:
-        try:
-            table_of(self.env)
-        except EnvError:
-            return False
-        return True
-
     def _check_on_table(self, block: Sequence[float], goal: Sequence[float]) -> None:
+        assert self.placement_table is not None, "called only where the block and the goal can be placed"
         try:
-            check_on_table(table_of(self.env), block, goal, ("the block", "the goal"))
+            check_on_table(self.placement_table, block, goal, ("the block", "the goal"))
         except ConfigError as exc:
             raise ExploreError(422, str(exc)) from exc
 
@@ -237,7 +232,8 @@ class Explorer:
         x, y, z = goal
         if z is None:
             return (x, y)
-        table = table_of(self.env)
+        table = self.placement_table
+        assert table is not None, "called only where the block and the goal can be placed"
         if not table.block_z <= z <= table.block_z + 0.5:
             raise ExploreError(
                 422, f"the goal's z {z:.3f} lies outside {table.block_z:.3f}..{table.block_z + 0.5:.3f} m"
