@@ -8,7 +8,6 @@ from __future__ import annotations
 import dataclasses
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -48,13 +47,6 @@ def reports_for_itself() -> bool:
     return LOCAL_LAUNCH not in os.environ and is_worker_zero()
 
 
-def free_port() -> int:
-    """A TCP port nothing on this machine listens on now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
-
-
 @dataclasses.dataclass(frozen=True)
 class WorkerEnd:
     """How one worker process ended."""
@@ -76,13 +68,18 @@ class WorkerEnd:
 def launch_local(args: Sequence[str], workers: int, threads: int, poll_s: float = 0.2) -> list[WorkerEnd]:
     """Run ``dtd`` with ``args`` as ``workers`` processes on this machine, each a worker of one
     job with ``threads`` torch threads; return how they ended. When one ends badly the others
-    are stopped (SIGTERM, then SIGKILL after 10 s); the first to fail comes first."""
+    are stopped (SIGTERM, then SIGKILL after 10 s); the first to fail comes first.
+
+    The launcher holds the job's rendezvous store, as torchrun's agent does, on a port the
+    system chose when it was bound: jobs started side by side cannot meet on one port."""
+    store = _rendezvous_store()
     env = {
         **os.environ,
         "WORLD_SIZE": str(workers),
         "LOCAL_WORLD_SIZE": str(workers),
         "MASTER_ADDR": "127.0.0.1",
-        "MASTER_PORT": str(free_port()),
+        "MASTER_PORT": str(store.port),
+        "TORCHELASTIC_USE_AGENT_STORE": "True",
         "OMP_NUM_THREADS": str(threads),
         LOCAL_LAUNCH: "1",
     }
@@ -108,6 +105,13 @@ def launch_local(args: Sequence[str], workers: int, threads: int, poll_s: float 
         if all(end.rank != rank for end in ends):
             ends.append(WorkerEnd(rank, process.pid, process.returncode))
     return _first_failure_first(ends)
+
+
+def _rendezvous_store():
+    """A rendezvous store on a loopback port of the system's choosing, for workers to join."""
+    import torch.distributed as dist
+
+    return dist.TCPStore("127.0.0.1", 0, is_master=True, wait_for_workers=False)
 
 
 def _stop(processes: Sequence[subprocess.Popen], grace_s: float = 10.0) -> None:
