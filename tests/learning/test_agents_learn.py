@@ -19,7 +19,12 @@ pytestmark = pytest.mark.learning
 
 
 def test_her_reaches_90_percent_on_fetch_reach(tmp_path):
-    config = TrainConfig(env="FetchReach-v4", algo=Algo.her, seed=0, epochs=5, n_cycles=10, threads=1)
+    # A batch of 256 rather than her's 1,024: FetchReach needs no more, and the test takes less
+    # than half the time; without relabelling (ddpg) the same run's success is 0.0.
+    learner = LearnerConfig(batch_size=256)
+    config = TrainConfig(
+        env="FetchReach-v4", algo=Algo.her, seed=0, epochs=5, n_cycles=10, threads=1, learner=learner
+    )
     state = train(config, run_dir=tmp_path / "run", show_progress=False)
     assert state.env_steps == 5_000
     figures = evaluate_run(tmp_path / "run", episodes=50, checkpoint="latest", seed=123)
