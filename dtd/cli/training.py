@@ -203,8 +203,10 @@ def plot(
 
     Every run found under RUN_DIRS (any folder with a config.json) counts; runs are grouped
     by environment and algorithm (and preset, where not the default). Lines are the mean over
-    seeds, bands the 25th-75th percentile. A run whose files cannot be read is left out
-    with a warning naming it; the others are drawn.
+    seeds, bands the 25th-75th percentile. Runs of two or more environments are also drawn
+    side by side in tasks.png (the paper's layout: a panel per task, success against env
+    steps). A run whose files cannot be read is left out with a warning naming it; the others
+    are drawn.
 
     Examples:
       dtd plot runs/push-sweep
@@ -214,7 +216,7 @@ def plot(
 
     Args:
         run_dirs: Sweep or run directories to read.
-        out: Where the figures (PNG and SVG per environment) and summary.csv go.
+        out: Where the figures (PNG and SVG per environment, and tasks) and summary.csv go.
         max_env_steps: Compare runs at this budget: each curve ends at its last epoch within it.
         strict: Exit with status 1 when a run was left out because its files cannot be read.
         stats: Also the statistics of final success over seeds (needs dtd[stats]): median,

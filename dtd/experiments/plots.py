@@ -1,4 +1,5 @@
-"""Training curves of many runs: one figure per environment and a summary table.
+"""Training curves of many runs: one figure per environment, one of every environment side by
+side (the paper's layout), and a summary table.
 
 Runs are found under the given directories (any folder holding a config.json), grouped by
 environment and then by algorithm (with the preset, where it is not the tuned default), and
@@ -12,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -29,42 +31,86 @@ from dtd.experiments.statistics import (
 from dtd.experiments.summary import summaries, summary_csv, summary_table
 from dtd.training.atomic import ensure_writable, write_text_atomic
 
+TASKS_FIGURE = "tasks"
+"""The stem of the figure of every environment side by side (written for runs of two or more)."""
+
 
 def draw(env: str, labels: dict[str, list[Curve]], path_stem: Path) -> list[Path]:
     """Draw one environment's curves against epochs and against env steps; write PNG and SVG
     beside ``path_stem``; return the files written."""
+    plt, ticker = _pyplot()
+    figure, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True, layout="constrained")
+    faint = False
+    for label, curves in labels.items():
+        faint |= _draw_label(axes, ("epoch", "env_steps"), label, curves)
+    axes[0].set_xlabel("epoch")
+    axes[0].xaxis.set_major_locator(ticker.MaxNLocator(integer=True))
+    axes[1].set_xlabel("env steps")
+    axes[0].set_ylabel("eval success rate")
+    _finish_axes(axes)
+    axes[0].legend(loc="upper left")
+    figure.suptitle(f"{env}: mean over seeds, band = 25th-75th percentile{_faint_note(faint)}")
+    return save_figure(figure, path_stem)
+
+
+def draw_tasks(groups: dict[str, dict[str, list[Curve]]], path_stem: Path) -> list[Path]:
+    """The paper's layout: one panel per environment, eval success against env steps, every
+    algorithm's mean over seeds and 25th-75th percentile band, in the colours of every other
+    figure; write PNG and SVG beside ``path_stem``; return the files written."""
+    plt, ticker = _pyplot()
+    figure, axes = plt.subplots(
+        1, len(groups), figsize=(4.6 * len(groups), 4.2), sharey=True, layout="constrained", squeeze=False
+    )
+    faint = False
+    for axis, (env, labels) in zip(axes[0], groups.items(), strict=True):
+        for label, curves in labels.items():
+            faint |= _draw_label([axis], ("env_steps",), label, curves)
+        axis.set_title(env.split(":")[-1])
+        axis.set_xlabel("env steps")
+        axis.xaxis.set_major_formatter(ticker.EngFormatter(sep=""))
+        axis.legend(loc="upper left", fontsize="small")
+    axes[0][0].set_ylabel("eval success rate")
+    _finish_axes(axes[0])
+    figure.suptitle(f"Mean over seeds, band = 25th-75th percentile{_faint_note(faint)}")
+    return save_figure(figure, path_stem)
+
+
+def _pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import matplotlib.ticker
 
-    figure, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True, layout="constrained")
-    faint = False
-    for label, curves in labels.items():
-        stats = band(curves)
-        style = {"color": colour_of(label), "linestyle": "--" if "(" in label else "-"}
-        for axis, x in zip(axes, (stats.epoch, stats.env_steps), strict=True):
-            complete = stats.runs == len(curves)
-            name = f"{label} ({len(curves)} seed{'s' if len(curves) != 1 else ''})"
-            colour = axis.plot(x[complete], stats.mean[complete], label=name, **style)[0].get_color()
-            if not complete.all():  # past the shortest run: fewer seeds, drawn faint
-                faint = True
-                tail = np.flatnonzero(~complete)
-                start = max(tail[0] - 1, 0)
-                axis.plot(x[start:], stats.mean[start:], color=colour, ls=style["linestyle"], alpha=0.35)
-            axis.fill_between(x, stats.low, stats.high, color=colour, alpha=0.2, linewidth=0)
-    axes[0].set_xlabel("epoch")
-    axes[0].xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
-    axes[1].set_xlabel("env steps")
-    axes[0].set_ylabel("eval success rate")
+    return plt, matplotlib.ticker
+
+
+def _draw_label(axes: Sequence[Any], against: Sequence[str], label: str, curves: list[Curve]) -> bool:
+    """Draw ``label``'s mean over seeds and band on each axis, against the :class:`Band` field
+    named beside it ("epoch" or "env_steps"); return whether part of it is past the shortest
+    run (drawn faint, as it is over fewer seeds)."""
+    stats = band(curves)
+    style = {"color": colour_of(label), "linestyle": "--" if "(" in label else "-"}
+    complete = stats.runs == len(curves)
+    name = f"{label} ({len(curves)} seed{'s' if len(curves) != 1 else ''})"
+    for axis, field in zip(axes, against, strict=True):
+        x = getattr(stats, field)
+        colour = axis.plot(x[complete], stats.mean[complete], label=name, **style)[0].get_color()
+        if not complete.all():
+            start = max(np.flatnonzero(~complete)[0] - 1, 0)
+            axis.plot(x[start:], stats.mean[start:], color=colour, ls=style["linestyle"], alpha=0.35)
+        axis.fill_between(x, stats.low, stats.high, color=colour, alpha=0.2, linewidth=0)
+    return not complete.all()
+
+
+def _finish_axes(axes: Sequence[Any]) -> None:
     for axis in axes:
         axis.set_ylim(-0.02, 1.02)
         axis.grid(alpha=0.3)
-    axes[0].legend(loc="upper left")
-    note = " (faint: past the shortest run, over fewer seeds)" if faint else ""
-    figure.suptitle(f"{env}: mean over seeds, band = 25th-75th percentile{note}")
-    return save_figure(figure, path_stem)
+
+
+def _faint_note(faint: bool) -> str:
+    return " (faint: past the shortest run, over fewer seeds)" if faint else ""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -78,10 +124,12 @@ def plot(
     directories: Sequence[Path], out: Path, max_env_steps: float | None = None, stats: bool = False
 ) -> PlotResult:
     """Find the runs under ``directories``; write a figure per environment and summary.csv
-    into ``out``. With ``max_env_steps``, every run is taken as it was at that budget
-    (:func:`cut_at`), so that runs of different lengths are compared at one. With ``stats``,
-    also the aggregate statistics of final success (:mod:`dtd.experiments.statistics`): a
-    figure per environment (ENV-stats), columns of summary.csv and a table."""
+    into ``out``, and where the runs span two or more environments the paper's layout of them
+    side by side (:func:`draw_tasks`, ``tasks.png``). With ``max_env_steps``, every run is
+    taken as it was at that budget (:func:`cut_at`), so that runs of different lengths are
+    compared at one. With ``stats``, also the aggregate statistics of final success
+    (:mod:`dtd.experiments.statistics`): a figure per environment (ENV-stats), columns of
+    summary.csv and a table."""
     runs = find_runs(directories)
     if max_env_steps is not None:
         runs = cut_at(runs, max_env_steps)
@@ -95,8 +143,11 @@ def plot(
         require_rliable()
     ensure_writable(Path(out), "the figures")
     figures = []
-    for env, labels in grouped(runs).items():
+    groups = grouped(runs)
+    for env, labels in groups.items():
         figures += draw(env, labels, Path(out) / env.split(":")[-1])
+    if len(groups) > 1:
+        figures += draw_tasks(groups, Path(out) / TASKS_FIGURE)
     rows = summaries(runs)
     extra = None
     statistics = group_statistics(runs) if stats else []

@@ -1,6 +1,7 @@
 """Sweep figures and summary from synthetic metrics.csv files with known values."""
 
 import csv
+import re
 
 import numpy as np
 import pytest
@@ -21,10 +22,10 @@ HER = {
 }
 
 
-def write_run(root, algo, seed, success, preset=Preset.tuned):
-    run = RunDir(root / f"FetchPush-v4-{algo}-s{seed}")
+def write_run(root, algo, seed, success, preset=Preset.tuned, env="FetchPush-v4"):
+    run = RunDir(root / f"{env}-{algo}-s{seed}")
     run.root.mkdir(parents=True)
-    write_config(run, TrainConfig(env="FetchPush-v4", algo=Algo(algo), seed=seed, preset=preset), {})
+    write_config(run, TrainConfig(env=env, algo=Algo(algo), seed=seed, preset=preset), {})
     rows = ["epoch,env_steps,wall_s,eval_success,train_success"]
     rows += [f"{e},{e * 1000},{e * 10.0},{s},0.0" for e, s in enumerate(success, start=1)]
     run.metrics.write_text("\n".join(rows) + "\n")
@@ -92,6 +93,31 @@ def test_plot_writes_figures_and_summary(sweep_dir):
     assert her["wall_s_to_0.9_median"] == "inf"
     assert "3000 [2000-not reached] (2/3)" in result.table
     assert "not reached (1/3)" in result.table  # 0.9: one run in three, the quartiles say no more
+
+
+def panel_texts(svg):
+    """The texts matplotlib wrote into an SVG figure (each drawn as paths after a comment)."""
+    return re.findall(r"<!-- (.+?) -->", svg.read_text())
+
+
+def test_runs_of_several_tasks_are_also_drawn_side_by_side(sweep_dir):
+    write_run(sweep_dir / "pick", "her", 0, [0.0, 0.1], env="FetchPickAndPlace-v4")
+    write_run(sweep_dir / "pick", "dtd", 0, [0.1, 0.2, 0.4], env="FetchPickAndPlace-v4")
+    result = plot([sweep_dir / "sweep", sweep_dir / "pick"], sweep_dir / "out")
+    names = sorted(path.name for path in result.figures)
+    assert names == sorted(
+        f"{stem}.{ext}"
+        for stem in ("FetchPush-v4", "FetchPickAndPlace-v4", "tasks")
+        for ext in ("png", "svg")
+    )
+    texts = panel_texts(sweep_dir / "out" / "tasks.svg")
+    # One panel per task, in sorted order; each titled, then its legend: its algorithms and seeds.
+    pick_title, push_title = texts.index("FetchPickAndPlace-v4"), texts.index("FetchPush-v4")
+    pick, push = texts[pick_title:push_title], texts[push_title:]
+    assert {"her (1 seed)", "dtd (1 seed)"} <= set(pick)
+    assert {"her (3 seeds)", "dtd (1 seed)"} <= set(push) and "her (1 seed)" not in push
+    assert texts.count("env steps") == 2 and "epoch" not in texts
+    assert "faint: past the shortest run" in " ".join(texts)  # her's seed 2 stops early on FetchPush
 
 
 def test_runs_compared_at_one_budget(sweep_dir):
