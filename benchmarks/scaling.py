@@ -22,7 +22,6 @@ import argparse
 import csv
 import json
 import os
-import socket
 import subprocess
 import sys
 import tempfile
@@ -33,12 +32,6 @@ import numpy as np
 
 SIZES = (1_000, 10_000, 100_000, 1_000_000)
 BATCHES = (256, 1024)
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
 
 
 def gradient_sizes(batch: int = 256) -> tuple[int, int]:
@@ -62,7 +55,8 @@ def worker(rank: int, workers: int, port: int, out: str) -> None:
     import torch.distributed as dist
 
     torch.set_num_threads(1)
-    dist.init_process_group("gloo", init_method=f"tcp://127.0.0.1:{port}", rank=rank, world_size=workers)
+    store = dist.TCPStore("127.0.0.1", port, is_master=False)  # the one main() holds
+    dist.init_process_group("gloo", store=store, rank=rank, world_size=workers)
     results: dict[str, object] = {}
     sizes = sorted({*SIZES, *gradient_sizes()})
     for size in sizes:
@@ -155,13 +149,17 @@ def main() -> None:
     )
     parser.add_argument("--skip-training", action="store_true", help="only the all-reduce and update figures")
     args = parser.parse_args()
+    import torch.distributed as dist
     import torch.multiprocessing as mp
 
     sys.path.insert(0, str(Path(__file__).parent))
     print(f"machine: {os.cpu_count()} cores; 2 gloo workers on 127.0.0.1, 1 torch thread each")
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder) / "worker.json"
-        mp.spawn(worker, args=(2, free_port(), str(out)), nprocs=2, join=True)
+        # The rendezvous store is bound here on a port the system chooses, before the workers
+        # start, as dtd train --workers does: no other job can take the port in between.
+        store = dist.TCPStore("127.0.0.1", 0, is_master=True, wait_for_workers=False)
+        mp.spawn(worker, args=(2, store.port, str(out)), nprocs=2, join=True)
         measured = json.loads(out.read_text())
         measured.update(updates_alone())
         trained = {}
