@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import csv
+import json
 import os
+import select
+import shutil
+import signal
 import subprocess
 import sys
+import tempfile
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -22,14 +29,106 @@ TINY = [
 
 
 def dtd(*args: str | Path, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess[str]:
-    """Run ``python -m dtd ARGS`` and capture its output."""
-    return subprocess.run(
-        [sys.executable, "-m", "dtd", *map(str, args)],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=cwd,
-    )
+    """Run ``python -m dtd ARGS`` in a process of its own and capture its output.
+
+    The process is a fork of a server that has already imported torch, MuJoCo and
+    Gymnasium-Robotics (:mod:`tests.cli_server`), so that each command starts in well under a
+    second; with ``DTD_TESTS_FRESH_INTERPRETERS=1``, or an environment changed since the
+    server started, it is a fresh interpreter instead."""
+    command = [sys.executable, "-m", "dtd", *map(str, args)]
+    server = _server()
+    if server is None:
+        return subprocess.run(command, capture_output=True, text=True, timeout=timeout, cwd=cwd)
+    return server.run(command, cwd, timeout)
+
+
+class _CommandServer:
+    """The client side of one :mod:`tests.cli_server` process."""
+
+    def __init__(self) -> None:
+        self.env = _environment()
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "tests.cli_server"],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            bufsize=0,
+            cwd=Path(__file__).resolve().parents[1],
+        )
+        self.folder = Path(tempfile.mkdtemp(prefix="dtd-tests-output-"))
+
+    def usable(self) -> bool:
+        return self.process.poll() is None and _environment() == self.env
+
+    def run(self, command: list[str], cwd: Path | None, timeout: float) -> subprocess.CompletedProcess[str]:
+        stdout, stderr = self.folder / "stdout", self.folder / "stderr"
+        stdout.write_bytes(b"")
+        stderr.write_bytes(b"")
+        request = {
+            "args": command[3:],
+            "cwd": str(Path(cwd) if cwd is not None else Path.cwd()),
+            "env": dict(os.environ),
+            "stdout": str(stdout),
+            "stderr": str(stderr),
+        }
+        assert self.process.stdin is not None and self.process.stdout is not None
+        message = (json.dumps(request) + "\n").encode()
+        while message:
+            message = message[self.process.stdin.write(message) :]
+        replies = self.process.stdout.fileno()
+        pid = int(_read_line(replies, timeout=60))
+        try:
+            returncode = int(_read_line(replies, timeout))
+        except TimeoutError:
+            os.kill(pid, signal.SIGKILL)
+            _read_line(replies, timeout=60)
+            output = stdout.read_text(), stderr.read_text()
+            raise subprocess.TimeoutExpired(command, timeout, *output) from None
+        return subprocess.CompletedProcess(command, returncode, stdout.read_text(), stderr.read_text())
+
+    def close(self) -> None:
+        if self.process.stdin is not None:
+            self.process.stdin.close()
+        self.process.wait(timeout=30)
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+
+_servers: list[_CommandServer] = []
+
+
+def _server() -> _CommandServer | None:
+    """This test process's command server, started on first use; None where commands must
+    run in fresh interpreters."""
+    if os.environ.get("DTD_TESTS_FRESH_INTERPRETERS", "") not in ("", "0"):
+        return None
+    if _servers and _servers[-1].usable():
+        return _servers[-1]
+    if _servers and _servers[-1].process.poll() is None:
+        return None  # the environment changed since the server started: a fresh interpreter
+    _servers.append(_CommandServer())
+    if len(_servers) == 1:
+        atexit.register(lambda: [server.close() for server in _servers])
+    return _servers[-1]
+
+
+def _read_line(fd: int, timeout: float) -> str:
+    """One line from the unbuffered pipe ``fd`` (read a byte at a time, so that nothing past
+    the line is taken from the pipe); TimeoutError after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    line = b""
+    while not line.endswith(b"\n"):
+        ready, _, _ = select.select([fd], [], [], max(0.0, deadline - time.monotonic()))
+        if not ready:
+            raise TimeoutError
+        byte = os.read(fd, 1)
+        if not byte:
+            raise RuntimeError("the dtd command server of the tests ended")
+        line += byte
+    return line.decode()
+
+
+def _environment() -> dict[str, str]:
+    """The environment a command would get, but for the variable naming pytest's current test."""
+    return {name: value for name, value in os.environ.items() if name != "PYTEST_CURRENT_TEST"}
 
 
 def read_metrics(run_dir: Path) -> list[dict[str, str]]:

@@ -110,7 +110,7 @@ def test_every_task_of_the_paper_trains(tmp_path, env_id, obs_dim, algo):
     run_dir = tmp_path / "run"
     args = ["--n-cycles", "1", "--updates-per-cycle", "2", "--batch-size", "16", "--hidden-sizes", "16",
             "--test-episodes", "1", "--episodes-per-cycle", "1", "--buffer-size", "1000",
-            "--no-progress"]  # fmt: skip
+            "--collector", "inline", "--no-progress"]  # fmt: skip
     result = dtd("train", "--env", env_id, "--algo", algo, "--epochs", "1", *args, "--run-dir", run_dir)
     assert result.returncode == 0, result.stderr
     assert json.loads((run_dir / "config.json").read_text())["derived"]["spec"]["obs_dim"] == obs_dim
