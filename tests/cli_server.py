@@ -25,13 +25,16 @@ import traceback
 
 
 def preload() -> None:
-    """Import what a training, evaluating or explaining command imports, through dtd's own
-    modules (so that their warning filters apply as they do for the command)."""
+    """Import what a training, evaluating, drawing or explaining command imports, through dtd's
+    own modules (so that their warning filters apply as they do for the command)."""
     import torch._dynamo  # noqa: F401  (what the first torch optimiser imports)
 
     import dtd.cli
     import dtd.envs.make
     import dtd.training.lifecycle  # noqa: F401
+    from dtd.experiments.figures import pyplot
+
+    pyplot()  # matplotlib, for the commands that draw
 
 
 def run_command(request: dict, replies: int) -> None:

@@ -1,4 +1,5 @@
-"""Writing matplotlib figures the way every figure of dtd is kept: PNG and SVG side by side."""
+"""Drawing matplotlib figures the way every figure of dtd is drawn (off screen) and kept (PNG and
+SVG side by side)."""
 
 from __future__ import annotations
 
@@ -6,10 +7,20 @@ from pathlib import Path
 from typing import Any
 
 
-def save_figure(figure: Any, path_stem: Path) -> list[Path]:
-    """Write ``figure`` as ``path_stem``.png and .svg, close it, and return the two paths."""
+def pyplot() -> Any:
+    """matplotlib's pyplot, drawing off screen (Agg) as every figure of dtd is drawn. Imported
+    when a figure is first drawn, so that commands that draw nothing never load matplotlib."""
+    import matplotlib
+
+    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    return plt
+
+
+def save_figure(figure: Any, path_stem: Path) -> list[Path]:
+    """Write ``figure`` as ``path_stem``.png and .svg, close it, and return the two paths."""
+    plt = pyplot()
     path_stem.parent.mkdir(parents=True, exist_ok=True)
     written = []
     for suffix in (".png", ".svg"):

@@ -19,7 +19,7 @@ import numpy as np
 
 from dtd.errors import RunDirError
 from dtd.experiments.curves import Curve, band
-from dtd.experiments.figures import save_figure
+from dtd.experiments.figures import pyplot, save_figure
 from dtd.experiments.run_curves import colour_of, cut_at, find_runs, grouped
 from dtd.experiments.statistics import (
     draw_statistics,
@@ -38,7 +38,9 @@ TASKS_FIGURE = "tasks"
 def draw(env: str, labels: dict[str, list[Curve]], path_stem: Path) -> list[Path]:
     """Draw one environment's curves against epochs and against env steps; write PNG and SVG
     beside ``path_stem``; return the files written."""
-    plt, ticker = _pyplot()
+    plt = pyplot()
+    from matplotlib import ticker
+
     figure, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True, layout="constrained")
     faint = False
     for label, curves in labels.items():
@@ -57,7 +59,9 @@ def draw_tasks(groups: dict[str, dict[str, list[Curve]]], path_stem: Path) -> li
     """The paper's layout: one panel per environment, eval success against env steps, every
     algorithm's mean over seeds and 25th-75th percentile band, in the colours of every other
     figure; write PNG and SVG beside ``path_stem``; return the files written."""
-    plt, ticker = _pyplot()
+    plt = pyplot()
+    from matplotlib import ticker
+
     figure, axes = plt.subplots(
         1, len(groups), figsize=(4.6 * len(groups), 4.2), sharey=True, layout="constrained", squeeze=False
     )
@@ -73,16 +77,6 @@ def draw_tasks(groups: dict[str, dict[str, list[Curve]]], path_stem: Path) -> li
     _finish_axes(axes[0])
     figure.suptitle(f"Mean over seeds, band = 25th-75th percentile{_faint_note(faint)}")
     return save_figure(figure, path_stem)
-
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import matplotlib.ticker
-
-    return plt, matplotlib.ticker
 
 
 def _draw_label(axes: Sequence[Any], against: Sequence[str], label: str, curves: list[Curve]) -> bool:

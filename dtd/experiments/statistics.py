@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from dtd.errors import DtdError
-from dtd.experiments.figures import save_figure
+from dtd.experiments.figures import pyplot, save_figure
 from dtd.experiments.run_curves import RunCurve, colour_of, label_order
 from dtd.training.trained_run import FINAL_EVALUATION
 
@@ -214,10 +214,7 @@ def statistics_table(groups: Sequence[GroupStatistics]) -> str:
 def draw_statistics(env: str, groups: Sequence[GroupStatistics], path_stem: Path) -> list[Path]:
     """One environment's aggregates with their intervals and its performance profiles, as PNG
     and SVG beside ``path_stem``."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     figure, axes = plt.subplots(1, 4, figsize=(16, 3.8), layout="constrained")
     for axis, name in zip(axes[:3], ("median", "iqm", "mean"), strict=True):

@@ -18,6 +18,7 @@ import numpy as np
 
 from dtd.agents.dot_to_dot import DotToDotAgent
 from dtd.errors import ConfigError, EnvError
+from dtd.experiments.figures import pyplot
 
 DEFAULT_START = (1.15, 0.55)
 """The block's default place: near one corner of the table, as in the paper's figure."""
@@ -150,10 +151,7 @@ def draw_heatmaps(
 ) -> Path:
     """Panels of heatmaps (label, slices per checkpoint) as an image (the format follows
     ``path``'s suffix)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     heights = max(len(slices) for _, slices in columns)
     # One checkpoint: its slices side by side; several: a column each, a row per height.

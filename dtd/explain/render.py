@@ -22,6 +22,7 @@ from dtd.agents.interface import Agent
 from dtd.agents.records import Episodes
 from dtd.agents.segments import episode_plan
 from dtd.envs.spec import EnvSpec
+from dtd.experiments.figures import pyplot
 from dtd.training.rollout import run_episodes
 
 GOAL_RGBA = (0.9, 0.05, 0.05, 1.0)
@@ -252,10 +253,7 @@ def write_video(frames: Sequence[np.ndarray], path: Path, fps: int = 25) -> Path
 
 def write_strip(episode: RenderedEpisode, path: Path, title: str) -> Path:
     """The key frames side by side with their captions, as a PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     count = len(episode.key_frames)
     figure, axes = plt.subplots(1, count, figsize=(3.2 * count, 3.6), layout="constrained")
