@@ -1,5 +1,5 @@
 """Runs ``dtd`` commands for the tests, each in a process of its own, without each importing
-torch, MuJoCo and Gymnasium-Robotics again.
+torch, MuJoCo, Gymnasium-Robotics and matplotlib again.
 
 The server imports what every command loads, then reads one request per line on stdin (JSON:
 the arguments, the working directory, the environment, files for stdout and stderr). It forks

@@ -31,9 +31,9 @@ TINY = [
 def dtd(*args: str | Path, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess[str]:
     """Run ``python -m dtd ARGS`` in a process of its own and capture its output.
 
-    The process is a fork of a server that has already imported torch, MuJoCo and
-    Gymnasium-Robotics (:mod:`tests.cli_server`), so that each command starts in well under a
-    second; with ``DTD_TESTS_FRESH_INTERPRETERS=1``, or an environment changed since the
+    The process is a fork of a server that has already imported torch, MuJoCo,
+    Gymnasium-Robotics and matplotlib (:mod:`tests.cli_server`), so that each command starts in
+    well under a second; with ``DTD_TESTS_FRESH_INTERPRETERS=1``, or an environment changed since the
     server started, it is a fresh interpreter instead."""
     command = [sys.executable, "-m", "dtd", *map(str, args)]
     server = _server()
