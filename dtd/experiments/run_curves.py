@@ -1,9 +1,10 @@
-"""Runs found on disk with their learning curves: grouped by environment and algorithm, and cut
-at an env-step budget to compare runs of different lengths."""
+"""Runs found on disk with their learning curves and final successes: grouped by environment and
+algorithm, and cut at an env-step budget to compare runs of different lengths."""
 
 from __future__ import annotations
 
 import dataclasses
+import json
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -29,6 +30,38 @@ class RunCurve:
     curve: Curve
     test_episodes: int = 10
     """Evaluation episodes behind each epoch's eval success."""
+
+
+@dataclasses.dataclass(frozen=True)
+class FinalSuccess:
+    """A run's final success and what it was measured on."""
+
+    value: float
+    episodes: int
+    """Evaluation episodes behind it."""
+    env_steps: float
+    """Env steps of the run's last epoch."""
+    saved: bool
+    """Whether it is the saved evaluation of the last checkpoint (RUN/eval-latest.json) rather
+    than the last epoch's eval success in metrics.csv."""
+
+
+def final_success(run: RunCurve) -> FinalSuccess:
+    """A run's final success: the saved evaluation of its latest checkpoint when that is of the
+    last epoch in its curve (``dtd eval RUN --episodes 100 --save``, ``dtd sweep
+    --final-episodes``), else the last epoch's eval success (over ``test_episodes``, noisier)."""
+    last_epoch, env_steps = int(run.curve.epoch[-1]), float(run.curve.env_steps[-1])
+    saved = RunDir(run.run_dir).final_evaluation
+    if saved.is_file():
+        try:
+            evaluation = json.loads(saved.read_text())
+            if int(evaluation["epoch"]) == last_epoch:
+                return FinalSuccess(
+                    float(evaluation["success_rate"]), int(evaluation["episodes"]), env_steps, True
+                )
+        except (ValueError, KeyError, TypeError):
+            pass
+    return FinalSuccess(run.curve.final_success, run.test_episodes, env_steps, False)
 
 
 def find_runs(directories: Sequence[Path]) -> list[RunCurve]:
@@ -72,12 +105,20 @@ def find_runs(directories: Sequence[Path]) -> list[RunCurve]:
     return sorted(trials.values(), key=lambda run: run.run_dir)
 
 
+def grouped_runs(runs: Sequence[RunCurve]) -> dict[str, dict[str, list[RunCurve]]]:
+    """Runs by environment, then by label (both in sorted order)."""
+    groups: dict[str, dict[str, list[RunCurve]]] = {}
+    for run in sorted(runs, key=lambda run: (run.env, label_order(run.label), str(run.run_dir))):
+        groups.setdefault(run.env, {}).setdefault(run.label, []).append(run)
+    return groups
+
+
 def grouped(runs: Sequence[RunCurve]) -> dict[str, dict[str, list[Curve]]]:
     """Curves by environment, then by label (both in sorted order)."""
-    groups: dict[str, dict[str, list[Curve]]] = {}
-    for run in sorted(runs, key=lambda run: (run.env, label_order(run.label), str(run.run_dir))):
-        groups.setdefault(run.env, {}).setdefault(run.label, []).append(run.curve)
-    return groups
+    return {
+        env: {label: [run.curve for run in members] for label, members in labels.items()}
+        for env, labels in grouped_runs(runs).items()
+    }
 
 
 def cut_at(runs: Sequence[RunCurve], env_steps: float) -> list[RunCurve]:

@@ -4,16 +4,17 @@ interquartile mean (IQM) and the mean with 95% stratified-bootstrap confidence i
 probability that one algorithm's run beats another's; and performance profiles (the share of
 runs whose final success exceeds each threshold).
 
-A run's final success is its 100-episode evaluation when one was saved for its last epoch
-(``dtd eval RUN --episodes 100 --save`` writes ``RUN/eval-latest.json``), else the last
-epoch's evaluation in metrics.csv (over ``--test-episodes`` episodes, noisier); each group says
-which it used.
+A run's final success is :func:`dtd.experiments.run_curves.final_success`: its 100-episode
+evaluation when one was saved for its last epoch (``dtd eval RUN --episodes 100 --save`` writes
+``RUN/eval-latest.json``), else the last epoch's evaluation in metrics.csv (over
+``--test-episodes`` episodes, noisier); each group says which it used, and at how many env
+steps its runs' finals were reached, since groups trained to different budgets do not compare
+like for like.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -22,8 +23,8 @@ import numpy as np
 
 from dtd.errors import DtdError
 from dtd.experiments.figures import pyplot, save_figure
-from dtd.experiments.run_curves import RunCurve, colour_of, label_order
-from dtd.training.trained_run import FINAL_EVALUATION
+from dtd.experiments.run_curves import FinalSuccess, RunCurve, colour_of, final_success, label_order
+from dtd.experiments.summary import span_text, steps_text
 
 BOOTSTRAP_REPS = 10_000
 """Bootstrap replications of each confidence interval."""
@@ -60,6 +61,8 @@ class GroupStatistics:
     """Each run's final success."""
     episodes: list[int]
     """How many evaluation episodes each run's final success counts."""
+    env_steps: list[float]
+    """The env steps of each run's last epoch."""
     median: Interval
     iqm: Interval
     mean: Interval
@@ -72,21 +75,6 @@ def require_rliable() -> None:
         import rliable  # noqa: F401
     except ImportError as exc:
         raise DtdError("--stats needs rliable, which is not installed: pip install 'dtd[stats]'") from exc
-
-
-def final_success(run: RunCurve) -> tuple[float, int]:
-    """A run's final success and the number of episodes behind it: its saved evaluation of
-    the last epoch when there is one, else the last epoch's row of metrics.csv."""
-    saved = run.run_dir / FINAL_EVALUATION
-    last_epoch = int(run.curve.epoch[-1])
-    if saved.is_file():
-        try:
-            evaluation = json.loads(saved.read_text())
-            if int(evaluation["epoch"]) == last_epoch:
-                return float(evaluation["success_rate"]), int(evaluation["episodes"])
-        except (ValueError, KeyError, TypeError):
-            pass
-    return float(run.curve.final_success), int(run.test_episodes)
 
 
 def group_statistics(runs: Sequence[RunCurve]) -> list[GroupStatistics]:
@@ -104,7 +92,8 @@ def group_statistics(runs: Sequence[RunCurve]) -> list[GroupStatistics]:
                 env,
                 label,
                 _scores(values),
-                [count for _, count in values],
+                [final.episodes for final in values],
+                [final.env_steps for final in values],
                 *_aggregates(label, _scores(values)),
                 _improvement(label, _scores(values), finals.get((env, BASELINE))),
             )
@@ -113,8 +102,8 @@ def group_statistics(runs: Sequence[RunCurve]) -> list[GroupStatistics]:
     return sorted(result, key=lambda group: (group.env, label_order(group.label)))
 
 
-def _scores(finals: Sequence[tuple[float, int]]) -> np.ndarray:
-    return np.array([value for value, _ in finals])
+def _scores(finals: Sequence[FinalSuccess]) -> np.ndarray:
+    return np.array([final.value for final in finals])
 
 
 def _aggregates(label: str, scores: np.ndarray) -> list[Interval]:
@@ -136,7 +125,7 @@ def _aggregates(label: str, scores: np.ndarray) -> list[Interval]:
 
 
 def _improvement(
-    label: str, scores: np.ndarray, baseline: Sequence[tuple[float, int]] | None
+    label: str, scores: np.ndarray, baseline: Sequence[FinalSuccess] | None
 ) -> dict[str, Interval]:
     """P(a run of ``label`` beats one of the baseline), where there is a baseline to beat."""
     from rliable import library, metrics
@@ -173,14 +162,13 @@ def statistics_columns(
     groups: Sequence[GroupStatistics],
 ) -> tuple[list[str], dict[tuple[str, str], list[str]]]:
     """Columns for summary.csv: their names, and per (environment, label) their cells."""
-    header = ["final_episodes_min", "final_episodes_max", "final_success_per_run"]
+    header = ["final_success_per_run"]
     for name in ("median", "iqm", "mean"):
         header += [f"final_{name}", f"final_{name}_ci_low", f"final_{name}_ci_high"]
     header += [f"p_improvement_over_{BASELINE}", "p_improvement_ci_low", "p_improvement_ci_high"]
     cells = {}
     for group in groups:
-        row = [str(min(group.episodes)), str(max(group.episodes))]
-        row.append(" ".join(f"{score:.3f}" for score in group.scores))
+        row = [" ".join(f"{score:.3f}" for score in group.scores)]
         for interval in (group.median, group.iqm, group.mean):
             row += [f"{interval.estimate:.4f}", f"{interval.low:.4f}", f"{interval.high:.4f}"]
         poi = group.improvement.get(BASELINE)
@@ -191,14 +179,15 @@ def statistics_columns(
 
 def statistics_table(groups: Sequence[GroupStatistics]) -> str:
     """The statistics as aligned text."""
-    heads = ["env", "algo", "runs", "final from", "median", "IQM", "mean", f"P(better than {BASELINE})"]
+    heads = ["env", "algo", "runs", "final from", "final at", "median", "IQM", "mean"]
+    heads.append(f"P(better than {BASELINE})")
     table = [heads]
     for group in groups:
-        lowest, highest = min(group.episodes), max(group.episodes)
-        source = f"{lowest} episodes" if lowest == highest else f"{lowest}-{highest} episodes"
+        source = span_text((min(group.episodes), max(group.episodes)), str) + " episodes"
+        budget = span_text((min(group.env_steps), max(group.env_steps)), steps_text)
         poi = group.improvement.get(BASELINE)
         table.append(
-            [group.env, group.label, str(len(group.scores)), source]
+            [group.env, group.label, str(len(group.scores)), source, budget]
             + [interval.text() for interval in (group.median, group.iqm, group.mean)]
             + [poi.text() if poi else "-"]
         )
@@ -206,9 +195,29 @@ def statistics_table(groups: Sequence[GroupStatistics]) -> str:
     text = ["  ".join(cell.ljust(width) for cell, width in zip(line, widths, strict=True)) for line in table]
     text.append(
         f"final success over seeds: estimate [{CONFIDENCE:.0%} stratified-bootstrap CI, {BOOTSTRAP_REPS:,} "
-        "replications] (rliable); final from: the episodes of the evaluation each run's final comes from"
+        "replications] (rliable); final from: the episodes of the evaluation each run's final comes "
+        "from; final at: the env steps of the runs' last epochs"
     )
+    text += unequal_budgets(groups)
     return "\n".join(text)
+
+
+def unequal_budgets(groups: Sequence[GroupStatistics]) -> list[str]:
+    """A warning per environment whose runs' finals were reached at different env steps: their
+    finals, and the probability of improvement, do not compare like for like."""
+    warnings_ = []
+    for env in sorted({group.env for group in groups}):
+        in_env = [group for group in groups if group.env == env]
+        if len({steps for group in in_env for steps in group.env_steps}) > 1:
+            budgets = ", ".join(
+                f"{group.label} {span_text((min(group.env_steps), max(group.env_steps)), steps_text)}"
+                for group in in_env
+            )
+            warnings_.append(
+                f"note: {env}'s finals were reached at different env steps ({budgets}); "
+                "dtd plot --max-env-steps compares every run at one budget"
+            )
+    return warnings_
 
 
 def draw_statistics(env: str, groups: Sequence[GroupStatistics], path_stem: Path) -> list[Path]:

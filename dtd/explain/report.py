@@ -15,6 +15,7 @@ from typing import Any
 
 from dtd.config import Algo, flat_items
 from dtd.experiments.curves import Curve, read_curve
+from dtd.experiments.run_curves import RunCurve, final_success
 from dtd.training.atomic import ensure_writable, write_text_atomic
 from dtd.training.run_dir import RunDir, read_config
 
@@ -126,6 +127,15 @@ def write_report(
     return Report(page, assets)
 
 
+def _final_text(run: RunDir, config: Any, curve: Curve) -> str:
+    """The run's final success and the evaluation it comes from."""
+    if not len(curve):
+        return "-"
+    final = final_success(RunCurve(run.root, str(config.env), config.algo.value, curve, config.test_episodes))
+    source = run.final_evaluation.name if final.saved else "the last epoch's evaluation"
+    return f"{final.value:.2f} over {final.episodes} episodes ({source})"
+
+
 def _header(run: RunDir, config: Any, curve: Curve) -> str:
     facts = {
         "run directory": str(run.root.resolve()),
@@ -135,7 +145,7 @@ def _header(run: RunDir, config: Any, curve: Curve) -> str:
         "seed": config.seed,
         "epochs finished": len(curve),
         "env steps": int(curve.env_steps[-1]) if len(curve) else 0,
-        "final eval success": f"{curve.final_success:.2f}" if len(curve) else "-",
+        "final eval success": _final_text(run, config, curve),
         "best eval success": f"{curve.eval_success.max():.2f}" if len(curve) else "-",
         "training time": f"{curve.wall_s[-1] / 60:.1f} min" if len(curve) else "-",
     }

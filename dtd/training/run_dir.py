@@ -2,6 +2,8 @@
 
 config.json            resolved configuration and package versions
 metrics.csv            one row per finished epoch
+eval-latest.json       the latest checkpoint's evaluation over many episodes, once saved
+                       (dtd eval --save, dtd sweep --final-episodes): the run's final of record
 tensorboard/           TensorBoard event files with the same figures
 checkpoints/latest.pt  everything needed to resume, after the last finished epoch
 checkpoints/best.pt    the agent with the best evaluation success (no replay)
@@ -29,6 +31,9 @@ CHECKPOINT_NAMES = ("latest", "best", "first")
 """Checkpoints every run keeps: after the last epoch, of the best evaluation (the highest of
 noisy evaluations over a few test episodes each: it flatters the agent), after the first."""
 
+FINAL_EVALUATION = "eval-latest.json"
+"""The saved evaluation of a run's latest checkpoint (``dtd eval --save``), its final of record."""
+
 _VERSIONED = ("dtd", "torch", "numpy", "mujoco", "gymnasium", "gymnasium-robotics")
 
 
@@ -45,6 +50,10 @@ class RunDir:
     @property
     def metrics(self) -> Path:
         return self.root / "metrics.csv"
+
+    @property
+    def final_evaluation(self) -> Path:
+        return self.root / FINAL_EVALUATION
 
     @property
     def tensorboard(self) -> Path:

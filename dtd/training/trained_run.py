@@ -34,8 +34,6 @@ class LoadedRun:
 
 EVAL_SEED = 1_000_003
 """Seed of evaluation episodes after training, apart from every seed a run trains with."""
-FINAL_EVALUATION = "eval-latest.json"
-"""The saved evaluation of a run's latest checkpoint (``dtd eval --save``), its final of record."""
 
 
 def load_run(

@@ -158,6 +158,9 @@ def test_heatmap_refuses_runs_without_a_high_level_and_points_off_the_table(reac
 def test_report_opens_in_a_browser_with_every_image_and_video_loaded(push_dtd_run, tmp_path):
     run_dir = tmp_path / "run"
     shutil.copytree(push_dtd_run, run_dir)
+    last_epoch = len((run_dir / "metrics.csv").read_text().strip().splitlines()) - 1
+    saved = {"epoch": last_epoch, "episodes": 100, "success_rate": 0.37}
+    (run_dir / "eval-latest.json").write_text(json.dumps(saved))
     result = dtd("report", run_dir, "--episodes", "2", "--resolution", "8")
     assert result.returncode == 0, result.stderr
     page = run_dir / "report.html"
@@ -173,6 +176,7 @@ def test_report_opens_in_a_browser_with_every_image_and_video_loaded(push_dtd_ru
     text = page.read_text()
     assert "Configuration" in text and "Plans" in text and "--segments" in text
     assert f"dtd explore {run_dir}" in text
+    assert "0.37 over 100 episodes (eval-latest.json)" in text  # the final of record, not the last epoch's
 
 
 def test_a_hand_subgoal_is_a_green_ghost_block_beside_the_goals():

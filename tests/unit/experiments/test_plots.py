@@ -1,6 +1,7 @@
 """Sweep figures and summary from synthetic metrics.csv files with known values."""
 
 import csv
+import json
 import re
 
 import numpy as np
@@ -93,6 +94,18 @@ def test_plot_writes_figures_and_summary(sweep_dir):
     assert her["wall_s_to_0.9_median"] == "inf"
     assert "3000 [2000-not reached] (2/3)" in result.table
     assert "not reached (1/3)" in result.table  # 0.9: one run in three, the quartiles say no more
+
+
+def test_a_saved_evaluation_of_the_last_epoch_is_the_summarys_final(sweep_dir):
+    her_s0 = sweep_dir / "sweep" / "FetchPush-v4-her-s0"
+    (her_s0 / "eval-latest.json").write_text(json.dumps({"epoch": 4, "episodes": 100, "success_rate": 0.42}))
+    her = {row.label: row for row in summaries(find_runs([sweep_dir / "sweep"]))}["her"]
+    assert (her.final_success.median, her.final_success.q25) == pytest.approx((0.42, 0.36))  # 0.3, 0.42, 1.0
+    assert (her.final_episodes, her.final_env_steps, her.saved_finals) == ((10, 100), (2000, 4000), 1)
+    result = plot([sweep_dir / "sweep"], sweep_dir / "out")
+    assert "0.42 [0.36-0.71]  10-100 episodes  2000-4000" in result.table
+    rows = {row["algo"]: row for row in csv.DictReader(result.summary_csv.read_text().splitlines())}
+    assert (rows["her"]["final_episodes_max"], rows["her"]["final_env_steps_min"]) == ("100", "2000")
 
 
 def panel_texts(svg):

@@ -66,3 +66,13 @@ def test_plot_stats_writes_a_figure_columns_and_a_table(record, tmp_path):
     assert float(rows["dtd"]["p_improvement_over_her"]) == pytest.approx(0.86)
     assert rows["her"]["p_improvement_over_her"] == ""
     assert "P(better than her)" in result.table and "0.86 [" in result.table
+    assert "different env steps" not in result.table
+
+
+def test_finals_at_different_budgets_are_said_to_be(record, tmp_path):
+    write_run(record, "her", 105, [0.0, 0.5, 0.6, 0.7])
+    result = plot([record], tmp_path / "out", stats=True)
+    budgets = "FetchPush-v4's finals were reached at different env steps (her 2000-4000, dtd 2000)"
+    assert budgets in result.table
+    (her,) = [group for group in group_statistics(find_runs([record])) if group.label == "her"]
+    assert her.env_steps == [2000.0] * 5 + [4000.0]
