@@ -184,10 +184,9 @@ def statistics_table(groups: Sequence[GroupStatistics]) -> str:
     table = [heads]
     for group in groups:
         source = span_text((min(group.episodes), max(group.episodes)), str) + " episodes"
-        budget = span_text((min(group.env_steps), max(group.env_steps)), steps_text)
         poi = group.improvement.get(BASELINE)
         table.append(
-            [group.env, group.label, str(len(group.scores)), source, budget]
+            [group.env, group.label, str(len(group.scores)), source, _budget(group)]
             + [interval.text() for interval in (group.median, group.iqm, group.mean)]
             + [poi.text() if poi else "-"]
         )
@@ -209,15 +208,17 @@ def unequal_budgets(groups: Sequence[GroupStatistics]) -> list[str]:
     for env in sorted({group.env for group in groups}):
         in_env = [group for group in groups if group.env == env]
         if len({steps for group in in_env for steps in group.env_steps}) > 1:
-            budgets = ", ".join(
-                f"{group.label} {span_text((min(group.env_steps), max(group.env_steps)), steps_text)}"
-                for group in in_env
-            )
+            budgets = ", ".join(f"{group.label} {_budget(group)}" for group in in_env)
             warnings_.append(
                 f"note: {env}'s finals were reached at different env steps ({budgets}); "
                 "dtd plot --max-env-steps compares every run at one budget"
             )
     return warnings_
+
+
+def _budget(group: GroupStatistics) -> str:
+    """The env steps of the group's runs' last epochs, short."""
+    return span_text((min(group.env_steps), max(group.env_steps)), steps_text)
 
 
 def draw_statistics(env: str, groups: Sequence[GroupStatistics], path_stem: Path) -> list[Path]:

@@ -45,8 +45,6 @@ class GroupSummary:
     """Fewest and most evaluation episodes behind a run's final success."""
     final_env_steps: tuple[float, float]
     """Fewest and most env steps of a run's last epoch: the budgets the finals were reached in."""
-    saved_finals: int
-    """How many runs' finals are saved evaluations of their last checkpoint."""
     reached: dict[float, int]
     """Per level, how many runs reached it."""
     steps_to: dict[float, Spread]
@@ -74,7 +72,6 @@ def summarise(env: str, label: str, runs: Sequence[RunCurve]) -> GroupSummary:
         final_success=Spread.of([final.value for final in finals]),
         final_episodes=(min(final.episodes for final in finals), max(final.episodes for final in finals)),
         final_env_steps=(min(final.env_steps for final in finals), max(final.env_steps for final in finals)),
-        saved_finals=sum(final.saved for final in finals),
         reached=reached,
         steps_to=steps_to,
         wall_to=wall_to,
