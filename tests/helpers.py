@@ -142,6 +142,28 @@ def without_times(rows: list[dict[str, str]]) -> list[dict[str, str]]:
     return [{k: v for k, v in row.items() if k != "wall_s"} for row in rows]
 
 
+# Figures of a run written on another machine agree with this machine's to float32 rounding, not
+# bit for bit: torch picks kernels for the CPU's instruction set (AVX2, AVX-512), whose sums round
+# differently. After 2 tiny epochs the losses differ by 1e-8 to 1e-5 of their value, and the eval
+# figures, whose episodes carry the difference through the simulator, by up to 4e-4; a changed
+# seed or a changed order of random draws moves them by tenths.
+ANOTHER_MACHINE = {"rel": 1e-2, "abs": 1e-5}
+
+
+def assert_same_figures(rows: list[dict[str, str]], expected: list[dict[str, str]]) -> None:
+    """``rows`` of metrics.csv are ``expected``, written on another machine: the same columns,
+    the same counts (epochs, steps, updates, episodes) and blanks, and each figure the same to
+    :data:`ANOTHER_MACHINE`'s tolerance."""
+    rows, expected = without_times(rows), without_times(expected)
+    assert [list(row) for row in rows] == [list(row) for row in expected]
+    for epoch, (row, want) in enumerate(zip(rows, expected, strict=True), start=1):
+        exact = {name for name, value in want.items() if not value or value.lstrip("-").isdigit()}
+        assert {name: row[name] for name in exact} == {name: want[name] for name in exact}, epoch
+        figures = {name: float(row[name]) for name in want.keys() - exact}
+        wanted = {name: float(want[name]) for name in figures}
+        assert figures == pytest.approx(wanted, **ANOTHER_MACHINE), epoch
+
+
 @contextlib.contextmanager
 def read_only(folder: Path) -> Iterator[None]:
     """Make ``folder`` read-only for this process while inside: a read-only bind mount where we

@@ -182,8 +182,8 @@ class TrainConfig:
     # other and ran 2.5 to 4 times slower than one (benchmarks/contention.py, docs/results/speed.md).
     threads: int = 0
     """Torch threads of the learner; 0: OMP_NUM_THREADS where it is set, else one. A run records
-    the number in its config.json; runs with the same number are the same bit for bit. More
-    than one is faster only on a machine nothing else is using."""
+    the number in its config.json; runs with the same number on one machine are the same bit
+    for bit. More than one is faster only on a machine nothing else is using."""
     collector: Collection = Collection.auto
     """Where training episodes are collected; a matter of speed only: at the same thread count
     the run is the same."""
