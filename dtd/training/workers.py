@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import importlib
 import math
 from collections.abc import Mapping, Sequence
 
@@ -22,6 +23,10 @@ from dtd.training.launch import launched_workers
 WORKER_TIMEOUT_S = 300.0
 """How long a worker waits for the others at any collective step before giving up (a worker
 that dies is noticed at once; this bounds a worker that hangs or a machine cut off)."""
+
+
+GROUP_HOLDING_MODULE = "torch.distributed.nn.functional"
+"""A module of torch whose functions keep the process group that exists when it is imported."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -70,6 +75,11 @@ def join_group(workers: int) -> WorkerGroup:
     if world != workers:
         raise ConfigError(f"the run has {workers} workers; this job started {world}")
     if not dist.is_initialized():
+        # Imported before the group exists: its functions take the world group as a default
+        # argument, so imported after it (torch's optimisers import them on first use, through
+        # torch._dynamo) they would hold it past leave_group, and gloo's threads would run into
+        # the interpreter's exit, which they can abort (SIGABRT, about one run in ten).
+        importlib.import_module(GROUP_HOLDING_MODULE)
         dist.init_process_group("gloo", timeout=datetime.timedelta(seconds=WORKER_TIMEOUT_S))
     return WorkerGroup(dist.get_rank(), workers, _Reporting(ProcessGroup(), dist.get_rank(), workers))
 

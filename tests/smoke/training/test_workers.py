@@ -1,5 +1,6 @@
 """Data-parallel workers on torch.distributed: the same parameters on every worker, one worker
-as a run of its own, a killed worker, resume, and bad input (2 workers of 1 thread each)."""
+as a run of its own, a killed worker, resume, leaving the group, and bad input (2 workers of 1
+thread each)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from pathlib import Path
 
 import pytest
 import torch
+import torch.distributed as dist
 
 from tests.helpers import TINY, assert_same_figures, dtd, read_metrics
 
@@ -126,6 +128,49 @@ def test_a_killed_worker_stops_the_job_in_one_line_and_resume_finishes(tmp_path)
     assert sorted(path.name for path in (run_dir / "checkpoints" / "workers").iterdir()) == [
         "worker-1-epoch-4.pt"
     ]
+
+
+LEAVING_WORKER = """
+import os
+import torch
+from dtd.training.workers import join_group, leave_group
+
+def gloo_threads():
+    names = (open(f"/proc/self/task/{task}/comm").read().strip() for task in os.listdir("/proc/self/task"))
+    return [name for name in names if "gloo" in name]
+
+group = join_group(2)
+joined = len(gloo_threads())
+# A learner's optimiser, made once the group exists, imports torch._dynamo on first use.
+torch.optim.Adam([torch.nn.Parameter(torch.zeros(1))])
+group.barrier()
+leave_group()
+print(joined, len(gloo_threads()))
+"""
+
+
+def test_a_worker_that_leaves_the_group_has_no_gloo_threads_left():
+    # gloo threads still running when the interpreter exits can abort it (SIGABRT) after the
+    # run has finished: leaving the group must end them.
+    store = dist.TCPStore("127.0.0.1", 0, is_master=True, wait_for_workers=False)
+    job = {"WORLD_SIZE": "2", "MASTER_ADDR": "127.0.0.1", "MASTER_PORT": str(store.port)}
+    job |= {"TORCHELASTIC_USE_AGENT_STORE": "True", "OMP_NUM_THREADS": "1"}
+    workers = [
+        subprocess.Popen(
+            [sys.executable, "-c", LEAVING_WORKER],
+            env={**os.environ, **job, "RANK": str(rank)},
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for rank in range(2)
+    ]
+    for worker in workers:
+        stdout, stderr = worker.communicate(timeout=180)
+        assert worker.returncode == 0, stderr
+        joined, left = map(int, stdout.split())
+        assert joined > 0  # the group's threads are seen while it is joined
+        assert left == 0
 
 
 def test_bad_worker_input_is_one_line(tmp_path):
