@@ -221,10 +221,10 @@ def plot(
         strict: Exit with status 1 when a run was left out because its files cannot be read.
         stats: Also the statistics of final success over seeds (needs dtd[stats]): median,
             interquartile mean and mean with 95% stratified-bootstrap confidence intervals,
-            the probability that a run beats her's, and performance profiles (rliable); a
-            figure per environment (ENV-stats.png) and columns of summary.csv. A run's final
-            is its saved 100-episode evaluation (dtd eval RUN --episodes 100 --save) where
-            there is one for its last epoch.
+            the probability that a run beats one of her at its preset, and performance
+            profiles (rliable); a figure per environment (ENV-stats.png) and columns of
+            summary.csv. A run's final is its saved 100-episode evaluation (dtd eval RUN
+            --episodes 100 --save) where there is one for its last epoch.
     """
     from dtd.experiments.plots import plot as draw_plots
     from dtd.experiments.run_curves import UnreadableRun

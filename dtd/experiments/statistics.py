@@ -36,7 +36,7 @@ PROFILE_REPS = 2_000
 THRESHOLDS = np.linspace(0.0, 1.0, 51)
 """Success thresholds of the performance profiles."""
 BASELINE = "her"
-"""The algorithm others are compared with (probability of improvement)."""
+"""The algorithm others are compared with (probability of improvement), at the same preset."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -95,11 +95,18 @@ def group_statistics(runs: Sequence[RunCurve]) -> list[GroupStatistics]:
                 [final.episodes for final in values],
                 [final.env_steps for final in values],
                 *_aggregates(label, _scores(values)),
-                _improvement(label, _scores(values), finals.get((env, BASELINE))),
+                _improvement(label, _scores(values), finals.get((env, baseline_of(label)))),
             )
             for (env, label), values in finals.items()
         ]
     return sorted(result, key=lambda group: (group.env, label_order(group.label)))
+
+
+def baseline_of(label: str) -> str:
+    """The label ``label`` is compared with: :data:`BASELINE` of the same preset (``dtd`` with
+    ``her``, ``dtd (paper)`` with ``her (paper)``)."""
+    _, _, preset = label.partition(" ")
+    return f"{BASELINE} {preset}" if preset else BASELINE
 
 
 def _scores(finals: Sequence[FinalSuccess]) -> np.ndarray:
@@ -127,7 +134,8 @@ def _aggregates(label: str, scores: np.ndarray) -> list[Interval]:
 def _improvement(
     label: str, scores: np.ndarray, baseline: Sequence[FinalSuccess] | None
 ) -> dict[str, Interval]:
-    """P(a run of ``label`` beats one of the baseline), where there is a baseline to beat."""
+    """P(a run of ``label`` beats one of its baseline, :func:`baseline_of`), where there is one
+    to beat; keyed by :data:`BASELINE`."""
     from rliable import library, metrics
 
     if baseline is None or label.split(" ")[0] == BASELINE:

@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 
+from dtd.config import Preset
 from dtd.experiments.plots import plot
 from dtd.experiments.run_curves import find_runs
 from dtd.experiments.statistics import group_statistics
@@ -45,6 +46,17 @@ def test_estimates_are_the_runs_median_iqm_and_mean_and_dtds_probability_of_impr
     assert dtd.improvement["her"].estimate == pytest.approx(21.5 / 25)
     assert dtd.improvement["her"].high <= 1.0 and "her" not in her.improvement
     assert her.episodes == [10] * 5  # the last epoch's 10-episode evaluation
+
+
+def test_each_preset_is_compared_with_her_of_the_same_preset(record):
+    for seed, (her, dtd) in enumerate([(0.1, 0.2), (0.1, 0.3), (0.2, 0.1)], start=100):
+        write_run(record / "paper", "her", seed, [0.0, her], preset=Preset.paper)
+        write_run(record / "paper", "dtd", seed, [0.0, dtd], preset=Preset.paper)
+    groups = {group.label: group for group in group_statistics(find_runs([record]))}
+    assert groups["dtd"].improvement["her"].estimate == pytest.approx(21.5 / 25)
+    # P(dtd (paper) run > her (paper) run), ties counting half: 6.5 of 9 pairs.
+    assert groups["dtd (paper)"].improvement["her"].estimate == pytest.approx(6.5 / 9)
+    assert "her" not in groups["her (paper)"].improvement
 
 
 def test_a_saved_100_episode_evaluation_of_the_last_epoch_is_the_final(record):
