@@ -138,7 +138,7 @@ def _improvement(
     to beat; keyed by :data:`BASELINE`."""
     from rliable import library, metrics
 
-    if baseline is None or label.split(" ")[0] == BASELINE:
+    if baseline is None or baseline_of(label) == label:
         return {}
     pair = f"{label},{BASELINE}"
     points, intervals = library.get_interval_estimates(
