@@ -204,9 +204,9 @@ def plot(
     Every run found under RUN_DIRS (any folder with a config.json) counts; runs are grouped
     by environment and algorithm (and preset, where not the default). Lines are the mean over
     seeds, bands the 25th-75th percentile. Runs of two or more environments are also drawn
-    side by side in tasks.png (the paper's layout: a panel per task, success against env
-    steps). A run whose files cannot be read is left out with a warning naming it; the others
-    are drawn.
+    side by side in tasks.png (the paper's layout: a panel per task, the paper's tasks first
+    in its order, success against env steps). A run whose files cannot be read is left out
+    with a warning naming it; the others are drawn.
 
     Examples:
       dtd plot runs/push-sweep

@@ -20,7 +20,7 @@ import numpy as np
 from dtd.errors import RunDirError
 from dtd.experiments.curves import Curve, band
 from dtd.experiments.figures import pyplot, save_figure
-from dtd.experiments.run_curves import colour_of, cut_at, find_runs, grouped
+from dtd.experiments.run_curves import colour_of, cut_at, env_order, find_runs, grouped
 from dtd.experiments.statistics import (
     draw_statistics,
     group_statistics,
@@ -147,7 +147,7 @@ def plot(
     statistics = group_statistics(runs) if stats else []
     if statistics:
         extra = statistics_columns(statistics)
-        for env in sorted({group.env for group in statistics}):
+        for env in sorted({group.env for group in statistics}, key=env_order):
             in_env = [group for group in statistics if group.env == env]
             figures += draw_statistics(env, in_env, Path(out) / f"{env.split(':')[-1]}-stats")
     csv_path = Path(out) / "summary.csv"

@@ -106,15 +106,15 @@ def find_runs(directories: Sequence[Path]) -> list[RunCurve]:
 
 
 def grouped_runs(runs: Sequence[RunCurve]) -> dict[str, dict[str, list[RunCurve]]]:
-    """Runs by environment, then by label (both in sorted order)."""
+    """Runs by environment (:func:`env_order`), then by label (:func:`label_order`)."""
     groups: dict[str, dict[str, list[RunCurve]]] = {}
-    for run in sorted(runs, key=lambda run: (run.env, label_order(run.label), str(run.run_dir))):
+    for run in sorted(runs, key=lambda run: (env_order(run.env), label_order(run.label), str(run.run_dir))):
         groups.setdefault(run.env, {}).setdefault(run.label, []).append(run)
     return groups
 
 
 def grouped(runs: Sequence[RunCurve]) -> dict[str, dict[str, list[Curve]]]:
-    """Curves by environment, then by label (both in sorted order)."""
+    """Curves by environment, then by label, in the order of :func:`grouped_runs`."""
     return {
         env: {label: [run.curve for run in members] for label, members in labels.items()}
         for env, labels in grouped_runs(runs).items()
@@ -136,6 +136,17 @@ _COLOURS = {"ddpg": "tab:green", "her": "tab:blue", "dtd": "tab:red"}
 def colour_of(label: str) -> str | None:
     """The colour of an algorithm's label in every figure (None: matplotlib's next)."""
     return _COLOURS.get(label.split(" ")[0])
+
+
+_PAPER_TASKS = ("FetchPush", "FetchPickAndPlace", "HandManipulateBlock")
+
+
+def env_order(env: str) -> tuple[int, str]:
+    """The paper's tasks in its order (FetchPush, FetchPickAndPlace, HandManipulateBlock, each
+    in any version or variant), then any other environment by name."""
+    name = env.split(":")[-1].split("-v")[0]
+    rank = next((rank for rank, task in enumerate(_PAPER_TASKS) if name.startswith(task)), len(_PAPER_TASKS))
+    return rank, env
 
 
 def label_order(label: str) -> tuple[int, str]:

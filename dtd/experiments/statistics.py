@@ -23,7 +23,14 @@ import numpy as np
 
 from dtd.errors import DtdError
 from dtd.experiments.figures import pyplot, save_figure
-from dtd.experiments.run_curves import FinalSuccess, RunCurve, colour_of, final_success, label_order
+from dtd.experiments.run_curves import (
+    FinalSuccess,
+    RunCurve,
+    colour_of,
+    env_order,
+    final_success,
+    label_order,
+)
 from dtd.experiments.summary import span_text, steps_text
 
 BOOTSTRAP_REPS = 10_000
@@ -99,7 +106,7 @@ def group_statistics(runs: Sequence[RunCurve]) -> list[GroupStatistics]:
             )
             for (env, label), values in finals.items()
         ]
-    return sorted(result, key=lambda group: (group.env, label_order(group.label)))
+    return sorted(result, key=lambda group: (env_order(group.env), label_order(group.label)))
 
 
 def baseline_of(label: str) -> str:
@@ -213,7 +220,7 @@ def unequal_budgets(groups: Sequence[GroupStatistics]) -> list[str]:
     """A warning per environment whose runs' finals were reached at different env steps: their
     finals, and the probability of improvement, do not compare like for like."""
     warnings_ = []
-    for env in sorted({group.env for group in groups}):
+    for env in sorted({group.env for group in groups}, key=env_order):
         in_env = [group for group in groups if group.env == env]
         if len({steps for group in in_env for steps in group.env_steps}) > 1:
             budgets = ", ".join(f"{group.label} {_budget(group)}" for group in in_env)

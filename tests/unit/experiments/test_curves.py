@@ -5,6 +5,7 @@ import pytest
 
 from dtd.errors import RunDirError
 from dtd.experiments.curves import Curve, read_curve
+from dtd.experiments.run_curves import env_order
 
 
 def curve(success):
@@ -56,3 +57,22 @@ def test_a_level_met_exactly_counts_after_a_long_history():
     c = curve([*history, 1.0, 0.8, 0.9])
     assert c.smoothed(3)[-1] == pytest.approx(0.9)
     assert c.first_reaching(0.9, window=3) == (60 * 5000, 60 * 30.0)
+
+
+def test_tasks_are_ordered_as_in_the_paper_then_by_name():
+    envs = [
+        "Reacher-v5",
+        "HandManipulateBlockRotateZ-v1",
+        "FetchPickAndPlace-v4",
+        "FetchReach-v4",
+        "gymnasium_robotics:FetchPush-v4",
+        "Ant-v5",
+    ]
+    assert sorted(envs, key=env_order) == [
+        "gymnasium_robotics:FetchPush-v4",
+        "FetchPickAndPlace-v4",
+        "HandManipulateBlockRotateZ-v1",
+        "Ant-v5",
+        "FetchReach-v4",
+        "Reacher-v5",
+    ]

@@ -124,9 +124,9 @@ def test_runs_of_several_tasks_are_also_drawn_side_by_side(sweep_dir):
         for ext in ("png", "svg")
     )
     texts = panel_texts(sweep_dir / "out" / "tasks.svg")
-    # One panel per task, in sorted order; each titled, then its legend: its algorithms and seeds.
-    pick_title, push_title = texts.index("FetchPickAndPlace-v4"), texts.index("FetchPush-v4")
-    pick, push = texts[pick_title:push_title], texts[push_title:]
+    # One panel per task, in the paper's order (FetchPush first); each titled, then its legend.
+    push_title, pick_title = texts.index("FetchPush-v4"), texts.index("FetchPickAndPlace-v4")
+    push, pick = texts[push_title:pick_title], texts[pick_title:]
     assert {"her (1 seed)", "dtd (1 seed)"} <= set(pick)
     assert {"her (3 seeds)", "dtd (1 seed)"} <= set(push) and "her (1 seed)" not in push
     assert texts.count("env steps") == 2 and "epoch" not in texts
