@@ -65,6 +65,20 @@ class WorkerEnd:
         return f"worker {self.rank} (pid {self.pid}) exited with status {self.returncode}"
 
 
+def job_environment(workers: int, port: int, threads: int) -> dict[str, str]:
+    """What torchrun's agent sets for every worker of a one-machine job of ``workers``, less the
+    worker's rank: the group's size, its rendezvous store on ``port`` (held by the launcher),
+    and ``threads`` torch threads each."""
+    return {
+        "WORLD_SIZE": str(workers),
+        "LOCAL_WORLD_SIZE": str(workers),
+        "MASTER_ADDR": "127.0.0.1",
+        "MASTER_PORT": str(port),
+        "TORCHELASTIC_USE_AGENT_STORE": "True",
+        "OMP_NUM_THREADS": str(threads),
+    }
+
+
 def launch_local(args: Sequence[str], workers: int, threads: int, poll_s: float = 0.2) -> list[WorkerEnd]:
     """Run ``dtd`` with ``args`` as ``workers`` processes on this machine, each a worker of one
     job with ``threads`` torch threads; return how they ended. When one ends badly the others
@@ -73,16 +87,7 @@ def launch_local(args: Sequence[str], workers: int, threads: int, poll_s: float 
     The launcher holds the job's rendezvous store, as torchrun's agent does, on a port the
     system chose when it was bound: jobs started side by side cannot meet on one port."""
     store = _rendezvous_store()
-    env = {
-        **os.environ,
-        "WORLD_SIZE": str(workers),
-        "LOCAL_WORLD_SIZE": str(workers),
-        "MASTER_ADDR": "127.0.0.1",
-        "MASTER_PORT": str(store.port),
-        "TORCHELASTIC_USE_AGENT_STORE": "True",
-        "OMP_NUM_THREADS": str(threads),
-        LOCAL_LAUNCH: "1",
-    }
+    env = {**os.environ, **job_environment(workers, store.port, threads), LOCAL_LAUNCH: "1"}
     processes = [
         subprocess.Popen(
             [sys.executable, "-m", "dtd", *args],

@@ -15,6 +15,7 @@ import pytest
 import torch
 import torch.distributed as dist
 
+from dtd.training.launch import job_environment
 from tests.helpers import TINY, assert_same_figures, dtd, read_metrics
 
 pytestmark = pytest.mark.smoke
@@ -153,8 +154,7 @@ def test_a_worker_that_leaves_the_group_has_no_gloo_threads_left():
     # gloo threads still running when the interpreter exits can abort it (SIGABRT) after the
     # run has finished: leaving the group must end them.
     store = dist.TCPStore("127.0.0.1", 0, is_master=True, wait_for_workers=False)
-    job = {"WORLD_SIZE": "2", "MASTER_ADDR": "127.0.0.1", "MASTER_PORT": str(store.port)}
-    job |= {"TORCHELASTIC_USE_AGENT_STORE": "True", "OMP_NUM_THREADS": "1"}
+    job = job_environment(2, store.port, threads=1)
     workers = [
         subprocess.Popen(
             [sys.executable, "-c", LEAVING_WORKER],
