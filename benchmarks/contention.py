@@ -50,7 +50,9 @@ def time_updates(threads: int, batch: int, updates: int, through_dtd: bool) -> d
     from updates import ACT, GOAL, OBS, random_batch  # benchmarks/updates.py: FetchPush's sizes
 
     rng = np.random.default_rng(0)
-    learner = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), LearnerConfig(batch_size=batch), gamma=0.98)
+    learner = DDPGLearner(
+        OBS, GOAL, ACT, BoxActionHead(1.0), LearnerConfig(batch_size=batch), 0.98, (-1.0, 0.0)
+    )
     batches = [random_batch(rng, batch) for _ in range(20)]
     for b in batches[:10]:
         learner.update(b)

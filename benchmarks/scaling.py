@@ -43,7 +43,9 @@ def gradient_sizes(batch: int = 256) -> tuple[int, int]:
     from dtd.agents.networks import BoxActionHead
     from dtd.config import LearnerConfig
 
-    learner = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), LearnerConfig(batch_size=batch), 0.98)
+    learner = DDPGLearner(
+        OBS, GOAL, ACT, BoxActionHead(1.0), LearnerConfig(batch_size=batch), 0.98, (-1.0, 0.0)
+    )
     return sum(p.numel() for p in learner.actor.parameters()), sum(
         p.numel() for p in learner.critic.parameters()
     )
@@ -92,7 +94,7 @@ def ms_per_update(batch: int, rng: np.random.Generator, collective: object = Non
     from dtd.config import LearnerConfig
 
     config = LearnerConfig(batch_size=batch)
-    learner = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), config, 0.98, collective or ALONE)
+    learner = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), config, 0.98, (-1.0, 0.0), collective or ALONE)
     batches = [random_batch(rng, batch) for _ in range(20)]
     for b in batches[:10]:
         learner.update(b)

@@ -84,7 +84,7 @@ def main() -> None:
 
 
 def fresh_learner(config: LearnerConfig, rng: np.random.Generator) -> DDPGLearner:
-    learner = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), config, gamma=0.98)
+    learner = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), config, gamma=0.98, sparse_rewards=(-1.0, 0.0))
     learner.update_normalizers(rng.normal(size=(1000, OBS)), rng.normal(size=(1000, GOAL)))
     return learner
 

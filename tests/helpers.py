@@ -19,6 +19,8 @@ from pathlib import Path
 
 import pytest
 
+from dtd.envs.goals import GoalFunctions, RewardFn
+
 # A budget that exercises every part of training in about a second per epoch (episodes collected
 # inline: a collecting process would take longer to start than such a run takes to train).
 TINY = [
@@ -129,6 +131,11 @@ def _read_line(fd: int, timeout: float) -> str:
 def _environment() -> dict[str, str]:
     """The environment a command would get, but for the variable naming pytest's current test."""
     return {name: value for name, value in os.environ.items() if name != "PYTEST_CURRENT_TEST"}
+
+
+def sparse_goals(reward: RewardFn) -> GoalFunctions:
+    """The verdicts of a -1/0 task that runs to its time limit, from its reward."""
+    return GoalFunctions(reward=reward, reached=lambda a, g: reward(a, g) == 0.0, terminal=None)
 
 
 def read_metrics(run_dir: Path) -> list[dict[str, str]]:

@@ -13,7 +13,11 @@ _FIELDS = Episodes._fields
 
 
 class EpisodeBuffer:
-    """A ring of whole episodes; when full, the oldest episode is overwritten first."""
+    """A ring of whole episodes; when full, the oldest episode is overwritten first.
+
+    Each slot holds up to T steps (an episode the task ended sooner fills the rest with
+    padding, which its ``length`` keeps out of sampling), so ``capacity`` episodes take the
+    memory of ``capacity * T`` transitions whatever their lengths."""
 
     def __init__(self, capacity: int, horizon: int, obs_dim: int, goal_dim: int, action_dim: int) -> None:
         if capacity < 1:
@@ -27,6 +31,7 @@ class EpisodeBuffer:
             step_goal=np.zeros((capacity, horizon, goal_dim), dtype=np.float32),
             desired_goal=np.zeros((capacity, goal_dim), dtype=np.float32),
             success=np.zeros((capacity,), dtype=np.float32),
+            length=np.zeros((capacity,), dtype=np.int64),
         )
         self.size = 0
         self.next_index = 0
@@ -76,7 +81,10 @@ class EpisodeBuffer:
             raise ValueError(f"buffer capacity {state['capacity']} differs from {self.capacity}")
         size = int(state["size"])
         for name in _FIELDS:
-            getattr(self._data, name)[:size] = state["data"][name].numpy()
+            if name in state["data"]:
+                getattr(self._data, name)[:size] = state["data"][name].numpy()
+        if "length" not in state["data"]:  # written when every episode ran to the time limit
+            self._data.length[:size] = self.horizon
         self.size = size
         self.next_index = int(state["next_index"])
         self.episodes_added = int(state["episodes_added"])

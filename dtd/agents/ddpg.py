@@ -14,6 +14,7 @@ from dtd.agents.networks import ActionHead, Actor, Critic, xavier_initialise
 from dtd.agents.normalizer import RunningNormalizer
 from dtd.agents.records import Batch
 from dtd.config import LearnerConfig
+from dtd.envs.goals import SparseRewards, return_bounds
 
 
 class DDPGLearner:
@@ -34,13 +35,16 @@ class DDPGLearner:
         head: ActionHead,
         config: LearnerConfig,
         gamma: float,
+        sparse_rewards: SparseRewards,
         collective: Collective = ALONE,
     ) -> None:
         self.config = config
         self.collective = collective
         self.gamma = gamma
-        # A -1/0 reward per step bounds the return to [-1/(1-gamma), 0].
-        self.return_bounds = (-1.0 / (1.0 - gamma), 0.0) if config.clip_return else (-np.inf, np.inf)
+        # A sparse reward bounds the return (-1/0 per step: to [-1/(1-gamma), 0]); a dense one is
+        # not clipped, rather than clipped to a range it does not have.
+        bounds = return_bounds(sparse_rewards, gamma) if config.clip_return else None
+        self.return_bounds = bounds or (-np.inf, np.inf)
         self.obs_norm = RunningNormalizer(obs_dim, config.norm_eps, config.norm_clip, collective)
         self.goal_norm = RunningNormalizer(goal_dim, config.norm_eps, config.norm_clip, collective)
         input_dim = obs_dim + goal_dim
@@ -137,8 +141,11 @@ class DDPGLearner:
             if batch.next_value is not None and batch.next_value_given is not None:
                 known = torch.as_tensor(batch.next_value_given)
                 next_q = torch.where(known, torch.as_tensor(batch.next_value, dtype=torch.float32), next_q)
-            # Episodes end only by the time limit, so every transition bootstraps.
+            # A transition bootstraps unless the task ended the episode there for its goal: the
+            # time limit (and an episode ended for another goal) cuts an episode, not its value.
             discount = self.gamma if batch.discount is None else torch.as_tensor(batch.discount)
+            if batch.terminal is not None:
+                discount = discount * (1.0 - torch.as_tensor(batch.terminal, dtype=torch.float32))
             target = torch.clamp(reward + discount * next_q, *self.return_bounds)
         q = self._q(nets["critic"], inputs, action)
         critic_loss = torch.mean(torch.square(q - target))

@@ -23,9 +23,10 @@ from dtd.agents.segments import (
     goal_separation,
     high_level_input,
     sample_segment_transitions,
+    segments_begun,
     subgoal_placement,
 )
-from dtd.envs.spec import RewardFn
+from dtd.envs.goals import GoalFunctions
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,7 +75,7 @@ class DotToDotAgent:
         low: DDPGLearner,
         high: DDPGLearner,
         buffer: EpisodeBuffer,
-        reward_fn: RewardFn,
+        goals: GoalFunctions,
         bounds: np.ndarray,
         action_noise: ActionNoise,
         exploration: SubgoalExploration,
@@ -93,7 +94,8 @@ class DotToDotAgent:
         self.low = low
         self.high = high
         self.buffer = buffer
-        self.reward_fn = reward_fn
+        self.goals = goals
+        """The task's reward, its verdict on reaching a goal and where it ends an episode."""
         self.bounds = bounds
         self.segment_starts = {int(start): n for n, start in enumerate(bounds[:-1])}
         self.action_noise = action_noise
@@ -192,11 +194,12 @@ class DotToDotAgent:
             size,
             rng,
             self.low_relabel_prob,
-            self.reward_fn,
+            self.goals.reward,
             self.low_window_end,
             self.low_past_share,
             self.low_n_step,
             self.low.gamma,
+            self.goals.terminal,
         )
 
     def _high_batch(self, episodes: Episodes, size: int, rng: np.random.Generator) -> Batch:
@@ -207,17 +210,18 @@ class DotToDotAgent:
             rng,
             self.high_relabel_prob,
             self.hindsight_action_prob,
-            self.reward_fn,
+            self.goals.reward,
             self.high_observed_gamma,
+            self.goals.terminal,
         )
         return batch._replace(actor_rows=None) if self.high_actor_all_segments else batch
 
     def store(self, episodes: Episodes, rng: np.random.Generator) -> None:
         self.buffer.add(episodes)
         # Each level normalises with the goals it will be trained on, relabelled ones included.
-        low = self._low_batch(episodes, episodes.count * self.buffer.horizon, rng)
+        low = self._low_batch(episodes, int(np.sum(episodes.length)), rng)
         self.low.update_normalizers(low.obs, low.goal)
-        high = self._high_batch(episodes, episodes.count * self.segments, rng)
+        high = self._high_batch(episodes, int(np.sum(segments_begun(self.bounds, episodes.length))), rng)
         self.high.update_normalizers(high.obs, high.goal)
 
     def train(self, updates: int, rng: np.random.Generator) -> dict[str, float]:
@@ -246,40 +250,54 @@ class DotToDotAgent:
         """How the sub-goals of these episodes went: reached at their segment's end, how far
         they lay from the start and from the goal, and where along the way (progress along
         the start-to-goal line and distance off it, over episodes whose goal is not met at
-        their start; NaN where every goal is). Intermediate sub-goals only. For goals with a
+        their start; NaN where every goal is). Intermediate sub-goals only, of the segments an
+        episode began; reached is NaN where the task's reward does not tell. For goals with a
         rotation, distances are of the positions, ``*_angle_*`` the rotations' angles in
         degrees, and the way is the rotation's (off it in degrees)."""
-        starts, ends = self.bounds[:-2], self.bounds[1:-1]
+        starts = self.bounds[:-2]
+        ends = np.minimum(self.bounds[1:-1][None, :], episodes.length[:, None])  # (B, N-1)
+        begun = self._intermediate_begun(episodes)
         subgoals = episodes.step_goal[:, starts]  # (B, N-1, G)
-        reached_goals = episodes.achieved_goal[:, ends]
+        reached_goals = np.take_along_axis(episodes.achieved_goal, ends[..., None], axis=1)
         goal_dim = subgoals.shape[-1]
-        rewards = self.reward_fn(reached_goals.reshape(-1, goal_dim), subgoals.reshape(-1, goal_dim))
+        reached = float("nan")
+        if self.goals.reached is not None:
+            verdicts = self.goals.reached(reached_goals.reshape(-1, goal_dim), subgoals.reshape(-1, goal_dim))
+            reached = _mean(verdicts.reshape(begun.shape)[begun])
         from_start = goal_separation(episodes.achieved_goal[:, :1], subgoals, self.quaternion)
         from_goal = goal_separation(episodes.desired_goal[:, None], subgoals, self.quaternion)
-        progress, off_line = self._placement(episodes, self._goal_away(episodes))
+        away = self._goal_away(episodes)
+        progress, off_line = self._placement(episodes, away)
         metrics = {
-            "subgoal_reached": float(np.mean(rewards == 0.0)),
-            "subgoal_from_start": float(np.mean(from_start["distance"])),
-            "subgoal_from_goal": float(np.mean(from_goal["distance"])),
+            "subgoal_reached": reached,
+            "subgoal_from_start": _mean(from_start["distance"][begun]),
+            "subgoal_from_goal": _mean(from_goal["distance"][begun]),
         }
         if "angle" in from_start:
-            metrics["subgoal_angle_from_start"] = float(np.mean(from_start["angle"]))
-            metrics["subgoal_angle_from_goal"] = float(np.mean(from_goal["angle"]))
-        metrics["subgoal_progress"] = float(np.mean(progress)) if progress.size else float("nan")
-        metrics["subgoal_off_line"] = float(np.mean(off_line)) if off_line.size else float("nan")
+            metrics["subgoal_angle_from_start"] = _mean(from_start["angle"][begun])
+            metrics["subgoal_angle_from_goal"] = _mean(from_goal["angle"][begun])
+        metrics["subgoal_progress"] = _mean(progress[begun[away]])
+        metrics["subgoal_off_line"] = _mean(off_line[begun[away]])
         return metrics
+
+    def _intermediate_begun(self, episodes: Episodes) -> np.ndarray:
+        """(B, N-1) whether each episode began each intermediate segment."""
+        begun = segments_begun(self.bounds, episodes.length)
+        return np.arange(self.segments - 1)[None, :] < begun[:, None]
 
     def placement_by_distance(self, episodes: Episodes, groups: int = 3) -> list[dict[str, Any]]:
         """Where the intermediate sub-goals lay along the way, for ``groups`` groups of
         episodes of equal size by the distance from the start to the goal (nearest first;
         episodes whose goal is met at their start left out): per group its distance range,
         episodes, success, and per sub-goal the mean progress along the start-to-goal line
-        (0 start, 1 goal) and mean distance off it."""
+        (0 start, 1 goal) and mean distance off it (over the episodes that began its segment)."""
         away = self._goal_away(episodes)
         separation = goal_separation(episodes.achieved_goal[:, 0], episodes.desired_goal, self.quaternion)
         separation_key = "goal_angle" if "angle" in separation else "goal_distance"
         distance = separation.get("angle", separation["distance"])[away]
         progress, off_line = self._placement(episodes, away)
+        begun = self._intermediate_begun(episodes)[away]
+        progress, off_line = np.where(begun, progress, np.nan), np.where(begun, off_line, np.nan)
         order = np.argsort(distance, kind="stable")
         summary: list[dict[str, Any]] = []
         if not len(order):
@@ -290,15 +308,18 @@ class DotToDotAgent:
                     separation_key: [round(float(distance[members][i]), 4) for i in (0, -1)],
                     "episodes": len(members),
                     "success": float(np.mean(episodes.success[away][members])),
-                    "progress": [round(float(v), 3) for v in np.mean(progress[members], axis=0)],
-                    "off_line": [round(float(v), 4) for v in np.mean(off_line[members], axis=0)],
+                    "progress": [round(float(v), 3) for v in _column_means(progress[members])],
+                    "off_line": [round(float(v), 4) for v in _column_means(off_line[members])],
                 }
             )
         return summary
 
     def _goal_away(self, episodes: Episodes) -> np.ndarray:
-        """(B,) whether an episode's goal is not already met at its start."""
-        return self.reward_fn(episodes.achieved_goal[:, 0], episodes.desired_goal) != 0.0
+        """(B,) whether an episode's goal is not already met at its start (every episode where
+        the task's reward does not tell)."""
+        if self.goals.reached is None:
+            return np.ones(episodes.count, dtype=bool)
+        return ~self.goals.reached(episodes.achieved_goal[:, 0], episodes.desired_goal)
 
     def _placement(self, episodes: Episodes, away: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:func:`subgoal_placement` of the intermediate sub-goals, over the episodes ``away``
@@ -314,7 +335,7 @@ class DotToDotAgent:
         """Per episode: the start, each segment's sub-goal, where the segment ended and whether
         it reached the sub-goal, the goal."""
         return [
-            episode_plan(episodes, index, self.bounds, self.reward_fn, self.quaternion)
+            episode_plan(episodes, index, self.bounds, self.goals.reached, self.quaternion)
             for index in range(episodes.count)
         ]
 
@@ -351,3 +372,17 @@ class DotToDotAgent:
         self.high.load_state_dict(state["high"])
         if "buffer" in state:
             self.buffer.load_state_dict(state["buffer"])
+
+
+def _mean(values: np.ndarray) -> float:
+    """The mean of ``values`` (NaN for none)."""
+    return float(np.mean(values)) if values.size else float("nan")
+
+
+def _column_means(values: np.ndarray) -> np.ndarray:
+    """Each column's mean over its rows that are not NaN (NaN where none is)."""
+    if not np.isnan(values).any():
+        return np.mean(values, axis=0)
+    counts = np.sum(~np.isnan(values), axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(counts > 0, np.nansum(values, axis=0) / np.maximum(counts, 1), np.nan)

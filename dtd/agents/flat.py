@@ -12,7 +12,7 @@ from dtd.agents.exploration import ActionNoise
 from dtd.agents.her import GoalStrategy, relabel_probability, sample_transitions
 from dtd.agents.interface import mean_metrics
 from dtd.agents.records import Batch, Episodes
-from dtd.envs.spec import RewardFn
+from dtd.envs.goals import GoalFunctions
 
 
 class GoalConditionedAgent:
@@ -22,7 +22,7 @@ class GoalConditionedAgent:
         self,
         learner: DDPGLearner,
         buffer: EpisodeBuffer,
-        reward_fn: RewardFn,
+        goals: GoalFunctions,
         noise: ActionNoise,
         strategy: GoalStrategy,
         replay_k: int,
@@ -31,7 +31,8 @@ class GoalConditionedAgent:
     ) -> None:
         self.learner = learner
         self.buffer = buffer
-        self.reward_fn = reward_fn
+        self.goals = goals
+        """The task's reward and where it ends an episode for a goal."""
         self.noise = noise
         self.relabel_prob = relabel_probability(strategy, replay_k)
         self.past_share = past_share
@@ -56,7 +57,7 @@ class GoalConditionedAgent:
     def store(self, episodes: Episodes, rng: np.random.Generator) -> None:
         self.buffer.add(episodes)
         # Normalise with the goals the learner will be trained on, relabelled ones included.
-        sample = self._batch(episodes, episodes.action.size // episodes.action.shape[-1], rng)
+        sample = self._batch(episodes, int(np.sum(episodes.length)), rng)
         self.learner.update_normalizers(sample.obs, sample.goal)
 
     def train(self, updates: int, rng: np.random.Generator) -> dict[str, float]:
@@ -72,10 +73,11 @@ class GoalConditionedAgent:
             size,
             rng,
             self.relabel_prob,
-            self.reward_fn,
+            self.goals.reward,
             past_share=self.past_share,
             n_step=self.n_step,
             gamma=self.learner.gamma,
+            terminal_fn=self.goals.terminal,
         )
 
     def episode_metrics(self, episodes: Episodes) -> dict[str, float]:

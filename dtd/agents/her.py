@@ -7,7 +7,7 @@ import enum
 import numpy as np
 
 from dtd.agents.records import Batch, Episodes
-from dtd.envs.spec import RewardFn
+from dtd.envs.goals import GoalTest, RewardFn
 
 
 class GoalStrategy(enum.Enum):
@@ -36,6 +36,34 @@ def future_indices(t: np.ndarray, window_end: np.ndarray, uniform: np.ndarray) -
     return t + 1 + np.minimum((uniform * span).astype(np.int64), span - 1)
 
 
+def sample_steps(
+    length: np.ndarray, horizon: int, batch_size: int, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """(episode, t) of ``batch_size`` steps drawn uniformly over the stored steps, episode b
+    holding steps 0 .. length[b]-1 (padding is never drawn). Where every episode ran the whole
+    ``horizon`` this is an episode, then a step (the draws of such tasks' runs always)."""
+    count = len(length)
+    if np.all(length == horizon):
+        return rng.integers(0, count, size=batch_size), rng.integers(0, horizon, size=batch_size)
+    ends = np.cumsum(length)
+    flat = rng.integers(0, ends[-1], size=batch_size)
+    episode = np.searchsorted(ends, flat, side="right")
+    return episode, flat - (ends[episode] - length[episode])
+
+
+def _window(
+    episode: np.ndarray, start: np.ndarray, stop: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For steps t = start .. stop-1 of each row, as (B, L) for the longest window L: the index
+    of the achieved goal each step reached (t + 1; padding repeats the last), each row's
+    episode, and the mask of the steps inside the row's window."""
+    longest = int(np.max(stop - start))
+    offsets = np.arange(longest)[None, :]
+    inside = offsets < (stop - start)[:, None]
+    reached = np.minimum(start[:, None] + 1 + offsets, stop[:, None])
+    return reached, np.broadcast_to(episode[:, None], reached.shape), inside
+
+
 def window_rewards(
     achieved_goal: np.ndarray,
     episode: np.ndarray,
@@ -47,16 +75,34 @@ def window_rewards(
     """Rewards of steps t = start .. stop-1 of each row's episode against its goal,
     reward_fn(achieved_goal[episode, t + 1], goal), as (B, L) for the longest window L, and the
     (B, L) mask of the steps inside each row's window (the rest are padding)."""
-    longest = int(np.max(stop - start))
-    offsets = np.arange(longest)[None, :]
-    inside = offsets < (stop - start)[:, None]
-    reached = np.minimum(start[:, None] + 1 + offsets, stop[:, None])  # padding repeats the last
-    batch, goal_dim = goal.shape
+    reached, episodes, inside = _window(episode, start, stop)
+    batch, longest = reached.shape
     rewards = reward_fn(
-        achieved_goal[episode[:, None], reached].reshape(-1, goal_dim),
-        np.repeat(goal, longest, axis=0),
+        achieved_goal[episodes, reached].reshape(-1, goal.shape[-1]), np.repeat(goal, longest, axis=0)
     ).reshape(batch, longest)
     return rewards, inside
+
+
+def window_until_terminal(
+    achieved_goal: np.ndarray,
+    episode: np.ndarray,
+    start: np.ndarray,
+    stop: np.ndarray,
+    goal: np.ndarray,
+    terminal_fn: GoalTest,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The (B, L) mask of the steps of each row's window (as :func:`window_rewards`) up to and
+    including the first whose achieved goal ends the episode for the row's goal, and (B,)
+    whether there is such a step: the task would have ended the episode there."""
+    reached, episodes, inside = _window(episode, start, stop)
+    batch, longest = reached.shape
+    ends = terminal_fn(
+        achieved_goal[episodes, reached].reshape(-1, goal.shape[-1]), np.repeat(goal, longest, axis=0)
+    ).reshape(batch, longest)
+    ends = ends & inside
+    terminal = ends.any(axis=1)
+    first = np.where(terminal, ends.argmax(axis=1), longest)
+    return inside & (np.arange(longest)[None, :] <= first[:, None]), terminal
 
 
 def sample_transitions(
@@ -69,6 +115,7 @@ def sample_transitions(
     past_share: float = 0.0,
     n_step: int = 1,
     gamma: float = 1.0,
+    terminal_fn: GoalTest | None = None,
 ) -> Batch:
     """Sample transitions uniformly over stored steps, relabel goals, recompute rewards.
 
@@ -81,29 +128,42 @@ def sample_transitions(
     t .. t+n-1 against the (relabelled) goal, cut at the episode's end, and the transition
     leads to the observation after them, with ``discount`` gamma to the power of the steps
     summed.
+
+    With ``terminal_fn`` (a task that ends an episode on reaching its goal), a transition is
+    terminal where its achieved goal ends the episode for its goal, relabelled or not; an n-step
+    sum stops at that step. The episode's own end is a truncation for every other goal: those
+    transitions bootstrap from the last observation.
     """
-    count, horizon = episodes.action.shape[:2]
-    episode = rng.integers(0, count, size=batch_size)
-    t = rng.integers(0, horizon, size=batch_size)
+    horizon = episodes.action.shape[1]
+    length = episodes.length
+    episode, t = sample_steps(length, horizon, batch_size, rng)
     relabel = rng.random(batch_size) < relabel_prob
     uniform = rng.random(batch_size)
 
     end = np.full(batch_size, horizon) if window_end is None else np.asarray(window_end)[t]
+    end = end if episodes.full else np.minimum(end, length[episode])
     future = future_indices(t, end, uniform)
     goal = episodes.step_goal[episode, t].copy()
     goal[relabel] = episodes.achieved_goal[episode[relabel], future[relabel]]
     if past_share > 0.0:
         past = relabel & (rng.random(batch_size) < past_share)
-        past_episode = rng.integers(0, count, size=batch_size)[past]
-        past_t = rng.integers(0, horizon, size=batch_size)[past]
-        goal[past] = episodes.step_goal[past_episode, past_t]
+        past_episode, past_t = sample_steps(length, horizon, batch_size, rng)
+        goal[past] = episodes.step_goal[past_episode[past], past_t[past]]
     # The reward of step t is earned by the goal it reached: the next achieved goal.
-    discount = None
+    discount, terminal = None, None
     if n_step == 1:
-        reward, next_t = reward_fn(episodes.achieved_goal[episode, t + 1], goal), t + 1
+        reached, next_t = episodes.achieved_goal[episode, t + 1], t + 1
+        reward = reward_fn(reached, goal)
+        if terminal_fn is not None:
+            terminal = terminal_fn(reached, goal).astype(np.float32)
     else:
-        next_t = np.minimum(t + n_step, horizon)
+        next_t = np.minimum(t + n_step, length[episode])
         rewards, inside = window_rewards(episodes.achieved_goal, episode, t, next_t, goal, reward_fn)
+        if terminal_fn is not None:
+            inside, ends = window_until_terminal(
+                episodes.achieved_goal, episode, t, next_t, goal, terminal_fn
+            )
+            terminal = ends.astype(np.float32)
         discounts = gamma ** np.arange(rewards.shape[1], dtype=np.float64)
         reward = np.sum(rewards * discounts * inside, axis=1).astype(np.float32)
         discount = (gamma ** (next_t - t).astype(np.float64)).astype(np.float32)
@@ -113,5 +173,6 @@ def sample_transitions(
         action=episodes.action[episode, t],
         reward=reward,
         next_obs=episodes.obs[episode, next_t],
+        terminal=terminal,
         discount=discount,
     )

@@ -8,7 +8,12 @@ import numpy as np
 
 
 class Episodes(NamedTuple):
-    """A batch of B whole episodes of T steps, as collected side by side."""
+    """A batch of B whole episodes of at most T steps, as collected side by side.
+
+    Episode b ran ``length[b]`` steps (T, or fewer where the task ended it sooner); past them
+    its arrays are padding that repeats its last observation, achieved goal and goal (zero
+    actions), so that index T is its end: padding is never sampled as experience.
+    """
 
     obs: np.ndarray
     """(B, T+1, obs_dim) observations, the last one after the final step."""
@@ -21,12 +26,19 @@ class Episodes(NamedTuple):
     desired_goal: np.ndarray
     """(B, goal_dim) the task's goal."""
     success: np.ndarray
-    """(B,) the task's ``is_success`` at the last step, 0 or 1."""
+    """(B,) the task's ``is_success`` at the step the episode ended, 0 or 1."""
+    length: np.ndarray
+    """(B,) steps each episode ran, 1 to T."""
 
     @property
     def count(self) -> int:
         """Number of episodes B."""
         return self.obs.shape[0]
+
+    @property
+    def full(self) -> bool:
+        """Whether every episode ran the whole horizon T."""
+        return bool(np.all(self.length == self.action.shape[1]))
 
     def final_distance(self) -> np.ndarray:
         """(B,) Euclidean distance between the last achieved goal and the task's goal."""
@@ -50,6 +62,9 @@ class Batch(NamedTuple):
     """Where given (rows of ``next_value_given``), the value of ``next_obs`` is known from what
     followed it and replaces the target critic's estimate in the target."""
     next_value_given: np.ndarray | None = None
+    terminal: np.ndarray | None = None
+    """Where given, (N,) whether the task ends the episode pursuing ``goal`` on this step (or
+    the steps summed into ``reward``): its target is the reward alone, with no value after it."""
     discount: np.ndarray | None = None
     """Where given, each row's discount of the value of ``next_obs`` (for n-step returns),
     instead of the learner's gamma."""

@@ -1,8 +1,9 @@
 """Episodes cut into segments, and the high level's transitions: pure, vectorised functions.
 
 Segment n covers steps ``bounds[n] .. bounds[n+1] - 1``; it starts from observation
-``bounds[n]`` and ends at observation ``bounds[n+1]``. One sub-goal is pursued per segment,
-the last segment's being the task's goal.
+``bounds[n]`` and ends at observation ``bounds[n+1]``, or at the episode's end where the task
+ended the episode inside it (segments after that were never begun). One sub-goal is pursued per
+segment, the last segment's being the task's goal.
 """
 
 from __future__ import annotations
@@ -11,10 +12,10 @@ from typing import Any
 
 import numpy as np
 
-from dtd.agents.her import future_indices, window_rewards
+from dtd.agents.her import future_indices, sample_steps, window_rewards, window_until_terminal
 from dtd.agents.records import Batch, Episodes
 from dtd.agents.rotations import angle_between, rotation_placement
-from dtd.envs.spec import RewardFn
+from dtd.envs.goals import GoalTest, RewardFn
 
 Quaternion = tuple[int, int] | None
 """Goal entries [start, stop) that hold a unit quaternion (a rotation), if any."""
@@ -51,6 +52,12 @@ def segment_mean_reward(
     return np.sum(rewards * inside, axis=1) / (stop - start)
 
 
+def segments_begun(bounds: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """(B,) how many segments each episode of ``length`` steps began (all, where it ran to the
+    time limit)."""
+    return np.searchsorted(bounds[:-1], length, side="left")
+
+
 def high_level_input(obs: np.ndarray, achieved_goal: np.ndarray) -> np.ndarray:
     """The high level observes o || ag: it places sub-goals relative to the achieved goal."""
     return np.concatenate([obs, achieved_goal], axis=-1)
@@ -70,8 +77,9 @@ def sample_segment_transitions(
     hindsight_action_prob: float,
     reward_fn: RewardFn,
     observed_gamma: float | None = None,
+    terminal_fn: GoalTest | None = None,
 ) -> Batch:
-    """High-level transitions, one per (episode, segment), with HER on the task's goal.
+    """High-level transitions, one per (episode, segment begun), with HER on the task's goal.
 
     A transition is (o||ag at the segment's start, g, sub-goal, mean reward over the segment
     against g, o||ag at its end), all from the same episode. With ``relabel_prob``, g is
@@ -79,30 +87,41 @@ def sample_segment_transitions(
     stored achieved goals. With ``hindsight_action_prob``, a non-final segment's sub-goal is
     replaced by the goal it actually reached. When the next segment is the last, its
     sub-goal is the goal itself, so that is the next action to bootstrap from; or, with
-    ``observed_gamma`` (the high level's discount), the segment before the last takes the
-    value of its end from what the episode went on to do against g instead: the last
-    segment's mean reward, then the final achieved goal's reward held for ever. The actor
-    learns only from the segments where it chooses (``actor_rows``: all but the last).
+    ``observed_gamma`` (the high level's discount), the segment before the last of an episode
+    that ran to the time limit takes the value of its end from what the episode went on to do
+    against g instead: the last segment's mean reward, then the final achieved goal's reward
+    held for ever. The actor learns only from the segments where it chooses (``actor_rows``:
+    all but the last).
+
+    With ``terminal_fn`` (a task that ends an episode on reaching its goal), a segment in which
+    an achieved goal ends the episode for g, relabelled or not, is terminal: its reward is the
+    mean over its steps up to that one. A segment cut short by the episode's end otherwise is
+    a truncation: it bootstraps from the episode's last observation.
     """
-    count = episodes.obs.shape[0]
     segments = len(bounds) - 1
     horizon = int(bounds[-1])
-    episode = rng.integers(0, count, size=batch_size)
-    segment = rng.integers(0, segments, size=batch_size)
+    episode, segment = sample_steps(segments_begun(bounds, episodes.length), segments, batch_size, rng)
     relabel = rng.random(batch_size) < relabel_prob
     uniform = rng.random(batch_size)
     hindsight = (rng.random(batch_size) < hindsight_action_prob) & (segment < segments - 1)
 
-    start, stop = bounds[segment], bounds[segment + 1]
+    length = episodes.length[episode]
+    start, stop = bounds[segment], np.minimum(bounds[segment + 1], length)
     goal = episodes.desired_goal[episode].copy()
-    future = future_indices(start, np.full(batch_size, horizon), uniform)
+    future = future_indices(start, length, uniform)
     goal[relabel] = episodes.achieved_goal[episode[relabel], future[relabel]]
 
     subgoal = episodes.step_goal[episode, start].copy()
     subgoal[hindsight] = episodes.achieved_goal[episode[hindsight], stop[hindsight]]
+    rewards, inside = window_rewards(episodes.achieved_goal, episode, start, stop, goal, reward_fn)
+    steps, terminal = stop - start, None
+    if terminal_fn is not None:
+        inside, ends = window_until_terminal(episodes.achieved_goal, episode, start, stop, goal, terminal_fn)
+        steps, terminal = np.sum(inside, axis=1), ends.astype(np.float32)
+    reward = np.sum(rewards * inside, axis=1) / steps
     next_value, next_value_given = None, None
     if observed_gamma is not None:
-        next_value_given = segment == segments - 2
+        next_value_given = (segment == segments - 2) & (length == horizon)
         next_value = np.zeros(batch_size, dtype=np.float32)
         rows = np.flatnonzero(next_value_given)
         if len(rows):
@@ -116,12 +135,13 @@ def sample_segment_transitions(
         obs=high_level_obs(episodes, episode, start),
         goal=goal,
         action=subgoal,
-        reward=segment_mean_reward(episodes.achieved_goal, episode, start, stop, goal, reward_fn),
+        reward=reward,
         next_obs=high_level_obs(episodes, episode, stop),
         next_action=goal,
         next_action_given=segment + 1 >= segments - 1,
         next_value=next_value,
         next_value_given=next_value_given,
+        terminal=terminal,
         actor_rows=segment < segments - 1,
     )
 
@@ -176,20 +196,26 @@ def episode_plan(
     episodes: Episodes,
     index: int,
     bounds: np.ndarray | None,
-    reward_fn: RewardFn | None = None,
+    reached_fn: GoalTest | None = None,
     quaternion: Quaternion = None,
 ) -> dict[str, Any]:
     """Episode ``index``'s plan: the start; each segment's sub-goal, the achieved goal at the
-    segment's end and whether that reached the sub-goal by the task's own reward (none without
-    ``bounds``; no verdicts without ``reward_fn``); the goal, the final achieved goal, success.
+    segment's end and whether that reached the sub-goal by the task's own measure (none without
+    ``bounds``, only the segments the episode began; no verdicts without ``reached_fn``); the
+    goal, the final achieved goal, success and the steps the episode ran.
     For goals with a rotation, ``angles`` (degrees): from the start to each sub-goal, from each
     segment's end to its sub-goal, from each sub-goal to the goal, from the start and from the
     final achieved goal to the goal."""
     achieved = episodes.achieved_goal[index]
     goal = episodes.desired_goal[index]
-    subgoals = np.zeros((0, achieved.shape[-1])) if bounds is None else episodes.step_goal[index, bounds[:-1]]
-    ends = achieved[bounds[1:]] if bounds is not None else np.zeros_like(subgoals)
-    reached = [] if reward_fn is None or bounds is None else (reward_fn(ends, subgoals) == 0.0).tolist()
+    length = int(episodes.length[index])
+    subgoals = np.zeros((0, achieved.shape[-1]))
+    ends = np.zeros_like(subgoals)
+    if bounds is not None:
+        begun = int(segments_begun(bounds, episodes.length[index : index + 1])[0])
+        subgoals = episodes.step_goal[index, bounds[:begun]]
+        ends = achieved[np.minimum(bounds[1 : begun + 1], length)]
+    reached = [] if reached_fn is None or bounds is None else reached_fn(ends, subgoals).tolist()
     plan: dict[str, Any] = {
         "start": achieved[0].tolist(),
         "subgoals": subgoals.tolist(),
@@ -198,6 +224,7 @@ def episode_plan(
         "goal": goal.tolist(),
         "final": achieved[-1].tolist(),
         "success": bool(episodes.success[index]),
+        "steps": length,
     }
     if quaternion is not None:
 

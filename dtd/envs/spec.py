@@ -4,16 +4,14 @@ goal box and batched reward; an environment that is not goal-conditioned is refu
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 
 import gymnasium as gym
 import numpy as np
 
+from dtd.envs.goals import SUCCESS_KEYS, GoalFunctions, ends_on_goal, goal_verdicts, measure_rewards
 from dtd.errors import EnvError
 
 GOAL_KEYS = ("observation", "achieved_goal", "desired_goal")
-
-RewardFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -34,6 +32,12 @@ class EnvSpec:
     """Upper corner of that box."""
     quaternion: tuple[int, int] | None = None
     """Goal entries [start, stop) that hold a unit quaternion (a rotation), if any."""
+    sparse_rewards: tuple[float, float] | None = None
+    """The task's two rewards, (goal not reached, reached), e.g. (-1, 0) or (0, 1); None for a
+    dense reward (measured: :func:`dtd.envs.goals.measure_rewards`)."""
+    ends_on_goal: bool = False
+    """Whether the task ends an episode as soon as its goal is reached (its compute_terminated,
+    or success where it defines none); else every episode runs to the time limit."""
 
     def default_gamma(self) -> float:
         """The reference discount 1 - 1/T."""
@@ -69,7 +73,10 @@ def env_spec(env: gym.Env, env_id: str) -> EnvSpec:
         raise EnvError(f"environment {env_id!r} has no time limit (max_episode_steps)")
     goal_dim = int(np.prod(space["desired_goal"].shape))
     quaternion = _quaternion_part(env, goal_dim)
+    _check_batched_reward(env, env_id, goal_dim)
     goal_low, goal_high = goal_bounds(env, quaternion)
+    sparse = measure_rewards(env, goal_low, goal_high, quaternion, env_id)
+    ends = ends_on_goal(env, goal_low, sparse)
     spec = EnvSpec(
         env_id=env_id,
         obs_dim=int(np.prod(space["observation"].shape)),
@@ -80,8 +87,9 @@ def env_spec(env: gym.Env, env_id: str) -> EnvSpec:
         goal_low=tuple(goal_low.tolist()),
         goal_high=tuple(goal_high.tolist()),
         quaternion=quaternion,
+        sparse_rewards=sparse,
+        ends_on_goal=ends,
     )
-    _check_batched_reward(env, spec)
     _check_success_reported(env, spec)
     return spec
 
@@ -124,36 +132,27 @@ def goal_bounds(
     return low, high
 
 
-def _check_batched_reward(env: gym.Env, spec: EnvSpec) -> None:
-    goals = np.zeros((2, spec.goal_dim))
+def _check_batched_reward(env: gym.Env, env_id: str, goal_dim: int) -> None:
+    goals = np.zeros((2, goal_dim))
     try:
         rewards = np.asarray(env.unwrapped.compute_reward(goals, goals, None))
     except Exception as exc:
-        raise EnvError(
-            f"environment {spec.env_id!r}: compute_reward fails on a batch of goals ({exc})"
-        ) from exc
+        raise EnvError(f"environment {env_id!r}: compute_reward fails on a batch of goals ({exc})") from exc
     if rewards.shape != (2,):
-        raise EnvError(
-            f"environment {spec.env_id!r}: compute_reward must return one reward per goal of a batch"
-        )
+        raise EnvError(f"environment {env_id!r}: compute_reward must return one reward per goal of a batch")
 
 
 def _check_success_reported(env: gym.Env, spec: EnvSpec) -> None:
     # Success is the task's own verdict at the last step; without it every episode would count 0.
     env.reset(seed=0)
     _, _, _, _, info = env.step(np.zeros(env.action_space.shape, dtype=env.action_space.dtype))
-    if "is_success" not in info:
+    if not any(key in info for key in SUCCESS_KEYS):
         raise EnvError(
-            f"environment {spec.env_id!r} does not report info['is_success'], which is what dtd "
-            "counts as success"
+            f"environment {spec.env_id!r} does not report info['is_success'] (or info['success']), "
+            "which is what dtd counts as success"
         )
 
 
-def reward_function(env: gym.Env) -> RewardFn:
-    """The environment's batched reward of achieved goals against goals."""
-    compute_reward = env.unwrapped.compute_reward
-
-    def reward(achieved_goal: np.ndarray, goal: np.ndarray) -> np.ndarray:
-        return np.asarray(compute_reward(achieved_goal, goal, None), dtype=np.float32)
-
-    return reward
+def goal_functions(env: gym.Env, spec: EnvSpec) -> GoalFunctions:
+    """The task's batched reward, reached and terminal verdicts on goals, as ``spec`` found it."""
+    return goal_verdicts(env, spec.sparse_rewards, spec.ends_on_goal)

@@ -24,7 +24,7 @@ from dtd.agents.networks import BoxActionHead, SubgoalHead
 from dtd.agents.segments import segment_bounds, segment_window_end
 from dtd.config import Algo, Collection, HighTarget, RelabelWindow, TrainConfig, with_algorithm_defaults
 from dtd.envs.make import make_envs
-from dtd.envs.spec import EnvSpec, reward_function
+from dtd.envs.spec import EnvSpec, goal_functions
 from dtd.errors import ConfigError
 from dtd.training.collector import Collector, InlineCollector, ProcessCollector
 from dtd.training.launch import local_workers
@@ -55,17 +55,18 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
         BoxActionHead(spec.action_max),
         config.learner,
         gamma,
+        spec.sparse_rewards,
         collective,
     )
     buffer = EpisodeBuffer.for_transitions(
         config.buffer_size, spec.horizon, spec.obs_dim, spec.goal_dim, spec.action_dim
     )
     noise = ActionNoise(config.noise_eps, config.random_eps, spec.action_max)
-    reward_fn = reward_function(env)
+    goals = goal_functions(env, spec)
     if config.algo is not Algo.dtd:
         strategy = GoalStrategy.future if config.algo is Algo.her else GoalStrategy.none
         return GoalConditionedAgent(
-            low, buffer, reward_fn, noise, strategy, config.replay_k, config.past_goal_share, config.n_step
+            low, buffer, goals, noise, strategy, config.replay_k, config.past_goal_share, config.n_step
         )
 
     if config.segments > spec.horizon:
@@ -77,9 +78,21 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
     )
     if config.high_target is HighTarget.observed and not high_gamma < 1.0:
         raise ConfigError(f"--high-target observed needs a high-level discount below 1, got {high_gamma}")
+    if config.high_target is HighTarget.observed and spec.ends_on_goal:
+        raise ConfigError(
+            f"--high-target observed holds an episode's final reward for ever, and {spec.env_id} ends "
+            "its episodes on reaching the goal; use --high-target bootstrap"
+        )
     head = SubgoalHead(config.subgoal_max_distance, spec.goal_low, spec.goal_high, spec.quaternion)
     high = DDPGLearner(
-        spec.obs_dim + spec.goal_dim, spec.goal_dim, spec.goal_dim, head, config.high, high_gamma, collective
+        spec.obs_dim + spec.goal_dim,
+        spec.goal_dim,
+        spec.goal_dim,
+        head,
+        config.high,
+        high_gamma,
+        spec.sparse_rewards,
+        collective,
     )
     schedule = HandOverSchedule(
         config.subgoal_eps_start,
@@ -92,7 +105,7 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
         low=low,
         high=high,
         buffer=buffer,
-        reward_fn=reward_fn,
+        goals=goals,
         bounds=bounds,
         action_noise=noise,
         exploration=SubgoalExploration(

@@ -44,8 +44,11 @@ class TrainingProgress:
         self.progress.update(self.task, advance=steps, epoch=epoch, rate=f"{steps_per_s:,.0f}")
 
     def epoch_done(self, row: Row) -> None:
-        """Show a finished epoch's figures."""
-        self.progress.update(self.task, eval=f"{row['eval_success']:.2f}")
+        """Show a finished epoch's figures; the total is estimated anew from the steps so far
+        (episodes that a task ends on reaching its goal are shorter than the time limit)."""
+        steps, epoch = int(row["env_steps"]), int(row["epoch"])
+        total = round(steps * self.epochs / epoch) if epoch > 0 else None
+        self.progress.update(self.task, eval=f"{row['eval_success']:.2f}", completed=steps, total=total)
         self.console.print(
             f"epoch {int(row['epoch'])}/{self.epochs}  steps {int(row['env_steps']):,}  "
             f"eval success {row['eval_success']:.3f}  train success {row['train_success']:.3f}  "

@@ -94,6 +94,7 @@ class Trainer:
         start = time.perf_counter()
         sums: dict[str, float] = {}
         collected = []
+        local_steps = 0
         self.collector.submit()
         for cycle in range(1, config.n_cycles + 1):
             episodes = self.collector.result()
@@ -107,11 +108,17 @@ class Trainer:
             if cycle < config.n_cycles and not config.collect_ahead:
                 self.collector.submit()
             collected.append(episodes)
-            steps = episodes.count * self.spec.horizon * self.group.workers
-            state.env_steps += steps
+            # Episodes the task ended sooner than the time limit took fewer steps; the other
+            # workers' are counted at the epoch's end, and shown meanwhile as this worker's.
+            steps = int(np.sum(episodes.length))
+            local_steps += steps
             state.episodes += episodes.count * self.group.workers
             state.updates += config.updates_per_cycle
-            self.progress.advance(steps, epoch, steps * cycle / (time.perf_counter() - start))
+            shown = steps * self.group.workers
+            self.progress.advance(
+                shown, epoch, local_steps * self.group.workers / (time.perf_counter() - start)
+            )
+        state.env_steps += self.group.total(local_steps)
         evaluation = run_many(self.eval_envs, self.agent, self.spec, config.test_episodes, False, self.rng)
         figures = self.group.mean(
             {

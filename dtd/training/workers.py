@@ -56,6 +56,12 @@ class WorkerGroup:
             means = np.where(counts > 0, sums / np.maximum(counts, 1), math.nan)
         return {name: float(mean) for name, mean in zip(names, means, strict=True)}
 
+    def total(self, count: int) -> int:
+        """The sum of ``count`` over the workers."""
+        if self.workers == 1:
+            return count
+        return round(float(self.collective.sum(np.array([count], dtype=np.float64))[0]))
+
     def barrier(self) -> None:
         """Wait until every worker has come here."""
         if self.workers > 1:

@@ -97,7 +97,7 @@ def test_imports_only_point_down():
     assert upward_imports(package_sources()) == []
 
 
-def test_agents_know_of_environments_only_their_spec_and_reward():
+def test_agents_know_of_environments_only_their_spec_and_goal_verdicts():
     sources = package_sources()
     used = {
         target
@@ -106,7 +106,7 @@ def test_agents_know_of_environments_only_their_spec_and_reward():
         for _, target in imported_modules(source, module, is_package)
         if part_of(target) == "envs"
     }
-    assert used <= {"dtd.envs.spec"}, used
+    assert used <= {"dtd.envs.spec", "dtd.envs.goals"}, used
 
 
 @pytest.mark.parametrize(

@@ -9,14 +9,20 @@ T, OBS, GOAL, ACT = 4, 3, 2, 2
 
 
 def episodes_numbered(first: int, count: int) -> Episodes:
-    """Episodes whose every entry holds the episode's number."""
+    """Episodes whose every entry holds the episode's number, of mixed lengths (number % T + 1)."""
     ids = np.arange(first, first + count, dtype=np.float32)
 
     def filled(*shape: int) -> np.ndarray:
         return np.broadcast_to(ids.reshape(-1, *([1] * len(shape))), (count, *shape)).copy()
 
     return Episodes(
-        filled(T + 1, OBS), filled(T + 1, GOAL), filled(T, ACT), filled(T, GOAL), filled(GOAL), ids.copy()
+        filled(T + 1, OBS),
+        filled(T + 1, GOAL),
+        filled(T, ACT),
+        filled(T, GOAL),
+        filled(GOAL),
+        ids.copy(),
+        (ids.astype(np.int64) % T) + 1,
     )
 
 
@@ -40,9 +46,11 @@ def test_every_field_of_a_slot_belongs_to_one_episode():
     buffer = EpisodeBuffer(4, T, OBS, GOAL, ACT)
     for first in range(0, 11, 3):
         buffer.add(episodes_numbered(first, 3))
-    for slot, number in enumerate(buffer.stored().success):
-        for field in buffer.stored():
+    stored = buffer.stored()
+    for slot, number in enumerate(stored.success):
+        for field in stored._replace(length=stored.success):
             assert np.all(field[slot] == number)
+        assert stored.length[slot] == int(number) % T + 1
 
 
 def test_state_round_trip():
@@ -67,6 +75,7 @@ def test_oldest_first_orders_a_wrapped_ring_by_age():
                 step_goal=np.zeros((1, 2, 1), np.float32),
                 desired_goal=np.zeros((1, 1), np.float32),
                 success=np.zeros(1, np.float32),
+                length=np.full(1, 2),
             )
         )
         added = buffer.stored().obs[buffer.oldest_first(), 0, 0].tolist()

@@ -16,6 +16,7 @@ from dtd.agents.networks import BoxActionHead
 from dtd.agents.records import Batch, Episodes
 from dtd.config import LearnerConfig
 from dtd.training.checkpoint import load_checkpoint, save_atomic
+from tests.helpers import sparse_goals
 
 OBS, GOAL, ACT, T = 5, 3, 2, 6
 SMALL = LearnerConfig(hidden_sizes=(32, 32), batch_size=16)
@@ -23,7 +24,9 @@ SMALL = LearnerConfig(hidden_sizes=(32, 32), batch_size=16)
 
 def make_learner(config: LearnerConfig = SMALL, seed: int = 0) -> DDPGLearner:
     torch.manual_seed(seed)
-    return DDPGLearner(OBS, GOAL, ACT, BoxActionHead(2.0), config=config, gamma=0.9)
+    return DDPGLearner(
+        OBS, GOAL, ACT, BoxActionHead(2.0), config=config, gamma=0.9, sparse_rewards=(-1.0, 0.0)
+    )
 
 
 def random_batch(rng: np.random.Generator, size: int = 16) -> Batch:
@@ -44,6 +47,7 @@ def random_episodes(rng: np.random.Generator, count: int = 4) -> Episodes:
         step_goal=rng.normal(size=(count, T, GOAL)).astype(np.float32),
         desired_goal=rng.normal(size=(count, GOAL)).astype(np.float32),
         success=np.zeros(count, np.float32),
+        length=np.full(count, T),
     )
 
 
@@ -148,7 +152,7 @@ def test_agent_checkpoint_round_trip_gives_the_same_actions(tmp_path, strategy):
         buffer = EpisodeBuffer(10, T, OBS, GOAL, ACT)
         noise = ActionNoise(0.2, 0.3, 2.0)
         return GoalConditionedAgent(
-            learner, buffer, lambda a, g: -np.ones(len(a), np.float32), noise, strategy, 4
+            learner, buffer, sparse_goals(lambda a, g: -np.ones(len(a), np.float32)), noise, strategy, 4
         )
 
     trained = agent(seed=0)

@@ -25,6 +25,7 @@ from dtd.agents.segments import (
 from dtd.config import LearnerConfig
 from dtd.envs.make import make_envs
 from dtd.training.checkpoint import load_checkpoint, save_atomic
+from tests.helpers import sparse_goals
 
 T, OBS, GOAL, ACT = 10, 4, 3, 2
 
@@ -38,7 +39,15 @@ def labelled_episodes(count: int = 3) -> Episodes:
     obs = np.concatenate([achieved, np.zeros((count, T + 1, 1), np.float32)], axis=-1) * 10
     goal = np.stack([e[:, 0], -np.ones(count, np.float32), np.ones(count, np.float32)], axis=-1)
     step_goal = np.stack([e[:, :T], t[:, :T], np.full((count, T), 2.0, np.float32)], axis=-1)
-    return Episodes(obs, achieved, obs[:, :T, :ACT].copy(), step_goal, goal, np.zeros(count, np.float32))
+    return Episodes(
+        obs,
+        achieved,
+        obs[:, :T, :ACT].copy(),
+        step_goal,
+        goal,
+        np.zeros(count, np.float32),
+        np.full(count, T),
+    )
 
 
 def reached_reward(achieved: np.ndarray, goal: np.ndarray) -> np.ndarray:
@@ -184,15 +193,15 @@ def test_goal_box_stops_at_the_height_where_the_object_rests():
 def make_agent(seed: int = 0, eps: float = 1.0, high_updates: int = 4, segments: int = 2) -> DotToDotAgent:
     torch.manual_seed(seed)
     config = LearnerConfig(hidden_sizes=(16,), batch_size=8)
-    low = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), config, 0.9)
+    low = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), config, 0.9, (-1.0, 0.0))
     head = SubgoalHead(0.3, (-1.0,) * GOAL, (60.0,) * GOAL, None)
-    high = DDPGLearner(OBS + GOAL, GOAL, GOAL, head, config, 0.5)
+    high = DDPGLearner(OBS + GOAL, GOAL, GOAL, head, config, 0.5, (-1.0, 0.0))
     bounds = segment_bounds(T, segments)
     return DotToDotAgent(
         low=low,
         high=high,
         buffer=EpisodeBuffer(20, T, OBS, GOAL, ACT),
-        reward_fn=reached_reward,
+        goals=sparse_goals(reached_reward),
         bounds=bounds,
         action_noise=ActionNoise(0.2, 0.3, 1.0),
         exploration=SubgoalExploration(HandOverSchedule(eps, eps, 0, 1), sigma=0.1, noise=0.1),
@@ -352,9 +361,9 @@ def make_pose_agent(rotation_angle: float) -> DotToDotAgent:
     torch.manual_seed(0)
     goal_dim = 7
     config = LearnerConfig(hidden_sizes=(16,), batch_size=8)
-    low = DDPGLearner(OBS, goal_dim, ACT, BoxActionHead(1.0), config, 0.9)
+    low = DDPGLearner(OBS, goal_dim, ACT, BoxActionHead(1.0), config, 0.9, (-1.0, 0.0))
     head = SubgoalHead(0.3, (-5.0,) * 3 + (-1.0,) * 4, (5.0,) * 3 + (1.0,) * 4, (3, 7))
-    high = DDPGLearner(OBS + goal_dim, goal_dim, goal_dim, head, config, 0.5)
+    high = DDPGLearner(OBS + goal_dim, goal_dim, goal_dim, head, config, 0.5, (-1.0, 0.0))
 
     def within_a_tenth(achieved: np.ndarray, goal: np.ndarray) -> np.ndarray:
         return -(angle_between(achieved[..., 3:], goal[..., 3:]) > 0.1).astype(np.float32)
@@ -363,7 +372,7 @@ def make_pose_agent(rotation_angle: float) -> DotToDotAgent:
         low=low,
         high=high,
         buffer=EpisodeBuffer(20, T, OBS, goal_dim, ACT),
-        reward_fn=within_a_tenth,
+        goals=sparse_goals(within_a_tenth),
         bounds=segment_bounds(T, 2),
         action_noise=ActionNoise(0.2, 0.3, 1.0),
         exploration=SubgoalExploration(HandOverSchedule(1.0, 1.0, 0, 1), 0.1, 0.1, rotation_angle),
@@ -401,7 +410,8 @@ def test_pose_sub_goals_are_reported_as_angles_along_the_rotation_to_the_goal():
     goal = np.tile(np.array([0.0, 0.0, 0.0, *quarter], np.float32), (count, 1))
     step_goal[:, T // 2 :] = goal[:, None]
     obs = np.zeros((count, T + 1, OBS), np.float32)
-    episodes = Episodes(obs, achieved, np.zeros((count, T, ACT), np.float32), step_goal, goal, np.ones(count))
+    actions = np.zeros((count, T, ACT), np.float32)
+    episodes = Episodes(obs, achieved, actions, step_goal, goal, np.ones(count), np.full(count, T))
     metrics = agent.episode_metrics(episodes)
     assert metrics["subgoal_from_start"] == pytest.approx(1.0)  # positions
     assert metrics["subgoal_angle_from_start"] == pytest.approx(45.0, abs=1e-3)

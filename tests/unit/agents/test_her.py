@@ -30,6 +30,7 @@ def labelled_episodes(count: int = 3, horizon: int = T) -> Episodes:
         step_goal=np.repeat(desired[:, None], horizon, axis=1),
         desired_goal=desired,
         success=np.zeros(count, np.float32),
+        length=np.full(count, horizon),
     )
 
 
