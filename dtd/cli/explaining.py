@@ -88,17 +88,20 @@ def render(
 
 def heatmap(
     run_dir: RunDirArgument,
-    start: str = "1.15,0.55",
-    goal: str = "1.45,0.95",
+    start: Annotated[str | None, optional("X,Y", "1.15,0.55")] = None,
+    goal: Annotated[str | None, optional("X,Y[,Z]", "1.45,0.95")] = None,
     out: Annotated[Path | None, optional("FILE", "RUN_DIR/heatmap.png")] = None,
     checkpoint: str = "first,latest",
     heights: Annotated[
         str | None, optional("Z,...", "the table's; on FetchPickAndPlace also 0.1, 0.2, 0.3 m above")
     ] = None,
     resolution: int = 60,
+    seed: int = 0,
 ) -> None:
     """Draw the high level's value of every sub-goal on a grid over the table (dtd runs on
-    FetchPush or FetchPickAndPlace), with the block and the goal placed where asked.
+    FetchPush or FetchPickAndPlace), with the block and the goal placed where asked; or, for a
+    task whose goals are points on a plane (the mazes), over its goal box from its own start
+    and goal.
 
     Examples:
       dtd heatmap runs/push-dtd-0 --out heat.png
@@ -106,12 +109,13 @@ def heatmap(
 
     Args:
         run_dir: A dtd run directory.
-        start: The block's x,y on the table (world frame, metres).
-        goal: The goal's x,y (or x,y,z).
+        start: The block's x,y on the table (world frame, metres; Fetch tasks).
+        goal: The goal's x,y (or x,y,z; Fetch tasks).
         out: The image to write (PNG, or SVG by suffix).
         checkpoint: Comma-separated checkpoints, a panel each: first (after epoch 1), latest, best, paths.
         heights: Comma-separated heights (z, m) of the slices.
         resolution: Grid cells along each side of the table.
+        seed: Seed of the reset that gives a planar task's start and goal.
     """
     import numpy as np
 
@@ -120,15 +124,18 @@ def heatmap(
     levels = _numbers(heights, "--heights") if heights is not None else None
     names = [name.strip() for name in checkpoint.split(",") if name.strip()]
     target = out if out is not None else run_dir / "heatmap.png"
-    path, columns = run_heatmaps(
-        run_dir, target, names, _numbers(start, "--start"), _numbers(goal, "--goal"), levels, resolution
-    )
+    placed = [
+        _numbers(text, name) if text is not None else None
+        for text, name in ((start, "--start"), (goal, "--goal"))
+    ]
+    path, columns = run_heatmaps(run_dir, target, names, *placed, levels, resolution, seed)
     for label, slices in columns:
         for heat in slices:
             row, column = np.unravel_index(np.argmax(heat.values), heat.values.shape)
             chosen = ", ".join(f"{v:.3f}" for v in heat.subgoal)
+            where = f", z {heat.z:.3f}" if heat.z is not None else ""
             print(
-                f"{label}, z {heat.z:.3f}: values {heat.values.min():.3f} to {heat.values.max():.3f}, "
+                f"{label}{where}: values {heat.values.min():.3f} to {heat.values.max():.3f}, "
                 f"highest at ({heat.xs[column]:.3f}, {heat.ys[row]:.3f}); chosen sub-goal ({chosen})"
             )
     print(f"wrote {path}")

@@ -51,8 +51,9 @@ HIGH_LEVEL_HINTS = {
 }
 """Metavar and hint of the learners' settings whose default (None) says nothing."""
 
-REQUIRED_ENV = {"env": ("ID", "(required)")}
-REQUIRED_ENV_UNLESS_RESUMED = {"env": ("ID", "(required, unless --resume)")}
+ENV_KWARGS_HINT = ("KEY=VALUE ...", "(default: none: the registered defaults)")
+REQUIRED_ENV = {"env": ("ID", "(required)"), "env_kwargs": ENV_KWARGS_HINT}
+REQUIRED_ENV_UNLESS_RESUMED = {"env": ("ID", "(required, unless --resume)"), "env_kwargs": ENV_KWARGS_HINT}
 """Metavar and hint (shown where the default would be) of options whose default says nothing."""
 
 

@@ -141,6 +141,11 @@ class TrainConfig:
 
     env: str | None = None
     """Gymnasium id of a goal-conditioned environment, e.g. FetchPush-v4, or module:EnvId."""
+    env_kwargs: tuple[str, ...] = ()
+    """Keyword arguments of the environment's constructor (and of gym.make, e.g.
+    max_episode_steps), each KEY=VALUE with VALUE read as JSON or Python (false, False, 3, 0.5,
+    [1, 2]) or else as text, e.g. --env-kwargs continuing_task=False reward_type=sparse; kept in
+    config.json for resume, eval, render, explore and export."""
     algo: Algo = Algo.her
     """Agent to train."""
     preset: Preset = Preset.tuned
@@ -284,9 +289,12 @@ def _typed(name: str, value: Any, kind: Any) -> Any:
         except ValueError as exc:
             raise ConfigError(f"unknown {name} {value!r}") from exc
     if typing.get_origin(kind) is tuple:
-        if isinstance(value, list | tuple) and all(_is_int(item) for item in value):
+        item_kind = typing.get_args(kind)[0]
+        accepts_item = _is_int if item_kind is int else (lambda item: isinstance(item, str))
+        if isinstance(value, list | tuple) and all(accepts_item(item) for item in value):
             return tuple(value)
-        raise ConfigError(f"{name} must be a list of integers, got {value!r}")
+        items = "integers" if item_kind is int else "strings"
+        raise ConfigError(f"{name} must be a list of {items}, got {value!r}")
     checks = {
         bool: (lambda v: isinstance(v, bool), "true or false"),
         int: (_is_int, "an integer"),

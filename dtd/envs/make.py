@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import ast
 import contextlib
 import difflib
 import io
+import json
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import gymnasium as gym
 
@@ -21,12 +25,39 @@ def register_robotics_envs() -> None:
     gym.register_envs(gymnasium_robotics)
 
 
-def make_env(env_id: str) -> gym.Env:
-    """Make ``env_id`` (a registered id or ``module:EnvId``) or raise :class:`EnvError`."""
+def env_kwargs(items: Sequence[str]) -> dict[str, Any]:
+    """``KEY=VALUE`` items as keyword arguments: each VALUE read as JSON, else as a Python
+    literal (``False``, ``None``), else as text; :class:`EnvError` for an item without a key."""
+    kwargs: dict[str, Any] = {}
+    for item in items:
+        key, equals, text = item.partition("=")
+        if not equals or not key.strip().isidentifier():
+            raise EnvError(f"--env-kwargs takes KEY=VALUE items, got {item!r}")
+        kwargs[key.strip()] = _literal(text.strip())
+    return kwargs
+
+
+def _literal(text: str) -> Any:
+    for read in (json.loads, ast.literal_eval):
+        try:
+            return read(text)
+        except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError):
+            continue
+    return text
+
+
+def make_env(env_id: str, kwargs: Mapping[str, Any] | None = None) -> gym.Env:
+    """Make ``env_id`` (a registered id or ``module:EnvId``), its constructor given ``kwargs``,
+    or raise :class:`EnvError`."""
     register_robotics_envs()
+    kwargs = dict(kwargs or {})
     try:
         with contextlib.redirect_stderr(io.StringIO()):
-            env = gym.make(env_id, disable_env_checker=True)
+            env = gym.make(env_id, disable_env_checker=True, **kwargs)
+    except TypeError as exc:
+        if not kwargs:
+            raise
+        raise EnvError(f"environment {env_id!r} refused --env-kwargs {_shown(kwargs)}: {exc}") from exc
     except ModuleNotFoundError as exc:
         module = env_id.split(":")[0]
         raise EnvError(f"cannot import module {module!r} named in environment id {env_id!r}") from exc
@@ -44,7 +75,19 @@ def _unknown_env_message(env_id: str) -> str:
     return f"unknown environment id {env_id!r}{hint}"
 
 
-def make_envs(env_id: str, count: int) -> tuple[list[gym.Env], EnvSpec]:
-    """``count`` instances of one environment and its checked spec."""
-    envs = [make_env(env_id) for _ in range(count)]
-    return envs, env_spec(envs[0], env_id)
+def _shown(kwargs: Mapping[str, Any]) -> str:
+    return " ".join(f"{key}={value!r}" for key, value in kwargs.items())
+
+
+def make_envs(
+    env_id: str, count: int, kwargs: Mapping[str, Any] | None = None
+) -> tuple[list[gym.Env], EnvSpec]:
+    """``count`` instances of one environment (its constructor given ``kwargs``) and its
+    checked spec."""
+    envs = [make_env(env_id, kwargs) for _ in range(count)]
+    try:
+        return envs, env_spec(envs[0], env_id)
+    except BaseException:
+        for env in envs:
+            env.close()
+        raise

@@ -3,7 +3,9 @@
 For the Fetch block tasks the block and the goal are put where the user says, the
 observation is read back from the simulator, and the high level's critic is evaluated at
 every cell of a grid over the table top (at the block's height, or at several heights for
-FetchPickAndPlace, whose goals may lie in the air).
+FetchPickAndPlace, whose goals may lie in the air). For a task whose goals are points on a
+plane (x, y), such as Gymnasium-Robotics' mazes, the grid covers the goal box and the start and
+goal are the task's own, from a seeded reset.
 """
 
 from __future__ import annotations
@@ -41,7 +43,8 @@ class Heatmap:
 
     xs: np.ndarray
     ys: np.ndarray
-    z: float
+    z: float | None
+    """The slice's height (None: planar goals)."""
     values: np.ndarray
     """(len(ys), len(xs)): row i is y = ys[i], column j is x = xs[j]."""
     start: np.ndarray
@@ -57,7 +60,10 @@ def table_of(env: gym.Env) -> Table:
     body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "table0")
     block = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, "object0:joint")
     if body < 0 or block < 0:
-        raise EnvError("heatmaps need a Fetch task with a block on a table (FetchPush, FetchPickAndPlace)")
+        raise EnvError(
+            "heatmaps need a Fetch task with a block on a table (FetchPush, FetchPickAndPlace) or a task "
+            "whose goals are points on a plane (x, y)"
+        )
     geom = next(i for i in range(model.ngeom) if model.geom_bodyid[i] == body)
     centre, half = data.geom_xpos[geom], model.geom_size[geom]
     height = float(getattr(unwrapped, "height_offset", centre[2] + half[2]))
@@ -123,16 +129,17 @@ class PlacedStart(gym.Wrapper):
 
 
 def value_slice(
-    agent: DotToDotAgent, observation: dict[str, np.ndarray], table: Table, z: float, resolution: int
+    agent: DotToDotAgent, observation: dict[str, np.ndarray], table: Table, z: float | None, resolution: int
 ) -> Heatmap:
     """The high level's values over a ``resolution`` x ``resolution`` grid of sub-goals
-    (cell centres) covering the table top at height ``z``."""
+    (cell centres) covering the table top at height ``z`` (None: sub-goals are points x, y)."""
     if resolution < 2:
         raise ConfigError(f"--resolution must be at least 2, got {resolution}")
     xs = _centres(table.x, resolution)
     ys = _centres(table.y, resolution)
     grid_x, grid_y = np.meshgrid(xs, ys)
-    candidates = np.stack([grid_x.ravel(), grid_y.ravel(), np.full(grid_x.size, z)], axis=1)
+    columns = [grid_x.ravel(), grid_y.ravel()] + ([] if z is None else [np.full(grid_x.size, z)])
+    candidates = np.stack(columns, axis=1)
     goal = np.asarray(observation["desired_goal"], dtype=np.float64)
     values = agent.subgoal_values(observation, goal, candidates).reshape(len(ys), len(xs))
     subgoal = agent.propose_subgoals(
@@ -165,15 +172,17 @@ def draw_heatmaps(
             axis = axes[0][row] if single else axes[row][column]
             image = axis.imshow(heat.values, origin="lower", extent=extent, cmap="viridis", aspect="equal")
             figure.colorbar(image, ax=axis, shrink=0.85, label="high-level value Q1(o, g, sub-goal)")
-            axis.plot(*heat.start[:2], "s", color="black", markersize=9, label="block")
+            planar = heat.z is None
+            axis.plot(*heat.start[:2], "s", color="black", markersize=9, label="start" if planar else "block")
             axis.plot(*heat.goal[:2], "o", color="red", markersize=9, label="goal")
             axis.plot(
                 *heat.subgoal[:2], "X", color="lime", markeredgecolor="black", markersize=11,
-                label=f"chosen sub-goal (z {heat.subgoal[2]:.2f} m)",
+                label="chosen sub-goal" if planar else f"chosen sub-goal (z {heat.subgoal[2]:.2f} m)",
             )  # fmt: skip
             axis.set_xlabel("x (m, world frame)")
             axis.set_ylabel("y (m, world frame)")
-            axis.set_title(f"{label}\nsub-goals at z = {heat.z:.3f} m", fontsize=10)
+            where = "sub-goals (x, y)" if planar else f"sub-goals at z = {heat.z:.3f} m"
+            axis.set_title(f"{label}\n{where}", fontsize=10)
             axis.legend(loc="upper left", fontsize=7, framealpha=0.8)
         for row in range(len(slices), heights):
             (axes[0][row] if single else axes[row][column]).set_axis_off()
@@ -188,14 +197,17 @@ def run_heatmaps(
     run_dir: Path,
     out: Path,
     checkpoints: Sequence[str] = ("first", "latest"),
-    start: Sequence[float] = DEFAULT_START,
+    start: Sequence[float] | None = None,
     goal: Sequence[float] | None = None,
     heights: Sequence[float] | None = None,
     resolution: int = 60,
+    seed: int = 0,
 ) -> tuple[Path, list[tuple[str, list[Heatmap]]]]:
     """Heatmaps of a dtd run's high level at each of ``checkpoints`` (a column each), drawn into
     ``out``. Heights default to the block's resting height, and for tasks whose goals may lie
-    in the air (FetchPickAndPlace) also 10, 20 and 30 cm above it."""
+    in the air (FetchPickAndPlace) also 10, 20 and 30 cm above it. A task with planar goals
+    (x, y) is mapped over its goal box, from its own start and goal after a reset with
+    ``seed``."""
     from dtd.config import Algo
     from dtd.training.atomic import ensure_writable
     from dtd.training.components import close_all
@@ -217,16 +229,31 @@ def run_heatmaps(
         try:
             env, agent = loaded.components.eval_envs[0], loaded.components.agent
             assert isinstance(agent, DotToDotAgent)
-            table = table_of(env)
-            levels = heights
-            if levels is None:
-                in_air = bool(getattr(env.unwrapped, "target_in_the_air", False))
-                levels = [table.block_z + lift for lift in ((0.0, 0.1, 0.2, 0.3) if in_air else (0.0,))]
-            observation = place_block_and_goal(env, start, goal if goal is not None else DEFAULT_GOAL)
-            slices = [value_slice(agent, observation, table, z, resolution) for z in levels]
+            spec = loaded.components.spec
+            if spec.goal_dim == 2 and spec.quaternion is None:
+                if start is not None or goal is not None or heights is not None:
+                    raise ConfigError(
+                        f"--start, --goal and --heights place a Fetch task's block; {config.env} is mapped "
+                        "from its own start and goal (--seed)"
+                    )
+                table = Table(
+                    (spec.goal_low[0], spec.goal_high[0]), (spec.goal_low[1], spec.goal_high[1]), 0.0
+                )
+                observation, _ = env.reset(seed=seed)
+                slices = [value_slice(agent, observation, table, None, resolution)]
+            else:
+                table = table_of(env)
+                levels = heights
+                if levels is None:
+                    in_air = bool(getattr(env.unwrapped, "target_in_the_air", False))
+                    levels = [table.block_z + lift for lift in ((0.0, 0.1, 0.2, 0.3) if in_air else (0.0,))]
+                placed = (start or DEFAULT_START, goal or DEFAULT_GOAL)
+                observation = place_block_and_goal(env, *placed)
+                slices = [value_slice(agent, observation, table, z, resolution) for z in levels]
             rows.append((f"after epoch {loaded.snapshot['state']['epoch']} ({name})", slices))
         finally:
             close_all(loaded.components)
     assert table is not None
-    title = f"{config.env}: the high level's value of each sub-goal\nfor the block (black) and goal (red)"
+    what = "start" if rows and rows[0][1][0].z is None else "block"
+    title = f"{config.env}: the high level's value of each sub-goal\nfor the {what} (black) and goal (red)"
     return draw_heatmaps(rows, table, Path(out), title), rows

@@ -40,6 +40,9 @@ TASK_CAMERAS = {
     "Fetch": {"distance": 1.2, "azimuth": 160.0, "elevation": -35.0, "lookat": np.array([1.3, 0.75, 0.45])},
     # A little further out than the default, so that the ghost blocks beside the hand fit.
     "Hand": {"distance": 0.6, "azimuth": 55.0, "elevation": -25.0, "lookat": np.array([1.05, 0.93, 0.17])},
+    # From above the maze's centre, the whole of a small maze in view.
+    "PointMaze": {"distance": 7.0, "azimuth": 90.0, "elevation": -90.0, "lookat": np.array([0.0, 0.0, 0.0])},
+    "AntMaze": {"distance": 10.0, "azimuth": 90.0, "elevation": -90.0, "lookat": np.array([0.0, 0.0, 0.0])},
 }
 
 
@@ -129,6 +132,19 @@ class SceneRenderer:
         self.renderer.close()
 
 
+PLANAR_DOT_RADIUS = 0.1
+"""Radius of the dots of planar goals (x, y), as the mazes' with cells a metre wide."""
+
+
+def _in_space(point: np.ndarray) -> np.ndarray:
+    """A goal's position as a point in space: its first three entries, or for a planar goal
+    (x, y) that point just above the floor."""
+    point = np.asarray(point, dtype=np.float64)
+    if len(point) >= 3:
+        return point[:3]
+    return np.concatenate([point, np.zeros(2 - len(point)), [PLANAR_DOT_RADIUS]])
+
+
 def goal_markers(env: gym.Env, spec: EnvSpec, goal: np.ndarray, subgoal: np.ndarray | None) -> list[Marker]:
     """Markers for the task's goal and the current sub-goal (None: no sub-goal to show).
 
@@ -137,9 +153,10 @@ def goal_markers(env: gym.Env, spec: EnvSpec, goal: np.ndarray, subgoal: np.ndar
     own beside it.
     """
     if spec.quaternion is None:
-        markers = [Marker(np.asarray(goal[:3]), GOAL_RGBA, DOT_RADIUS)]
+        radius = DOT_RADIUS if len(goal) >= 3 else PLANAR_DOT_RADIUS
+        markers = [Marker(_in_space(goal), GOAL_RGBA, radius)]
         if subgoal is not None:
-            markers.append(Marker(np.asarray(subgoal[:3]), SUBGOAL_RGBA, DOT_RADIUS * 0.8))
+            markers.append(Marker(_in_space(subgoal), SUBGOAL_RGBA, radius * 0.8))
         return markers
     if subgoal is None:
         return []
@@ -193,7 +210,7 @@ def render_episode(
 
     episode = run_episodes([env], agent, spec, False, rng, on_step=on_step)
     plan = plan_of(episode)[0] if plan_of is not None else None
-    keys = key_frames(spec.horizon, bounds, bool(episode.success[0]), plan)
+    keys = key_frames(int(episode.length[0]), bounds, bool(episode.success[0]), plan)
     return RenderedEpisode(frames, episode, keys, goal_pixels, subgoal_pixels)
 
 
@@ -201,7 +218,9 @@ def key_frames(
     horizon: int, bounds: np.ndarray | None, success: bool, plan: dict[str, Any] | None = None
 ) -> list[tuple[int, str]]:
     """(frame, caption) pairs: the start, each segment's end (when the next sub-goal is set)
-    and the final state; without segments, the start, the middle and the end. With a ``plan``
+    and the final state, after ``horizon`` steps (the episode's length: a task may end it
+    before the time limit, and segments it never began have no frame); without segments, the
+    start, the middle and the end. With a ``plan``
     that has ``angles`` (goals with a rotation), the captions give them in degrees: the first
     sub-goal's turn from the start and the goal's, how far each segment ended from its
     sub-goal (reached or missed), and how far the episode ended from the goal."""
@@ -218,6 +237,8 @@ def key_frames(
         )
     frames = [(0, start)]
     for number, end in enumerate(bounds[1:-1], start=1):
+        if end >= horizon:
+            break
         last = number + 1 == len(bounds) - 1
         following = "the goal is pursued" if last else f"sub-goal {number + 1} set"
         caption = f"segment {number} ends: {following}"

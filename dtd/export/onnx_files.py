@@ -23,6 +23,7 @@ from torch import nn
 
 from dtd.agents.dot_to_dot import DotToDotAgent
 from dtd.agents.flat import GoalConditionedAgent
+from dtd.envs.make import env_kwargs
 from dtd.envs.spec import EnvSpec
 from dtd.errors import ConfigError, DtdError
 from dtd.export.paths import PolicyPath, SubgoalPath, SubgoalValuePath
@@ -192,6 +193,7 @@ def describe(
     policy: dict[str, Any] = {
         "format": FORMAT,
         "env_id": spec.env_id,
+        "env_kwargs": env_kwargs(loaded.config.env_kwargs),
         "algo": loaded.config.algo.value,
         "opset": OPSET,
         "models": {
@@ -210,6 +212,7 @@ def describe(
         "action_dim": spec.action_dim,
         "action_max": spec.action_max,
         "horizon": spec.horizon,
+        "ends_on_goal": spec.ends_on_goal,
         "goal_box": {"low": list(spec.goal_low), "high": list(spec.goal_high)},
         "goal_quaternion": list(spec.quaternion) if spec.quaternion else None,
         "checkpoint": {
@@ -248,7 +251,8 @@ for t in range(policy["horizon"]):
                   "goal": o["desired_goal"][None]}
         goal = inputs["goal"] if t == bounds[-2] else high.run(None, cast(inputs))[0]
     action = low.run(None, cast({"observation": o["observation"][None], "subgoal": goal}))[0]
-    o, reward, terminated, truncated, info = env.step(action[0])"""
+    o, reward, terminated, truncated, info = env.step(action[0])
+    if terminated or truncated: break  # the time limit, or the goal reached where that ends it"""
         sessions = (
             "low, high = (ort.InferenceSession(policy['models'][k]['file']) "
             "for k in ('low_level', 'high_level'))"
@@ -257,17 +261,19 @@ for t in range(policy["horizon"]):
         acting = """for t in range(policy["horizon"]):
     inputs = {"observation": o["observation"][None], "goal": o["desired_goal"][None]}
     action = actor.run(None, cast(inputs))[0]
-    o, reward, terminated, truncated, info = env.step(action[0])"""
+    o, reward, terminated, truncated, info = env.step(action[0])
+    if terminated or truncated: break  # the time limit, or the goal reached where that ends it"""
         sessions = 'actor = ort.InferenceSession(policy["models"]["policy"]["file"])'
     example = f"""import json, gymnasium as gym, gymnasium_robotics, numpy as np, onnxruntime as ort
 gym.register_envs(gymnasium_robotics)
 policy = json.load(open("policy.json"))
 {sessions}
 cast = lambda feeds: {{name: np.asarray(value, dtype=np.float32) for name, value in feeds.items()}}
-env = gym.make(policy["env_id"])
+env = gym.make(policy["env_id"], **policy["env_kwargs"])
 o, _ = env.reset(seed=0)
 {acting}
-print(json.dumps({{"success": float(info["is_success"]), "achieved_goal": o["achieved_goal"].tolist()}}))"""
+success = float(info.get("is_success", info.get("success", 0.0)))  # the mazes say "success"
+print(json.dumps({{"success": success, "steps": t + 1, "achieved_goal": o["achieved_goal"].tolist()}}))"""
     checkpoint = policy["checkpoint"]
     when = "when to ask for the next sub-goal (`segments`), " if dtd else ""
     return f"""# {policy["algo"]} on {policy["env_id"]}, exported
@@ -280,7 +286,8 @@ models' outputs differed from the torch agent's by at most
 {policy["largest_difference_from_torch"]:.1e}.
 
 {files}
-- `policy.json`: dimensions, the goal box, {when}the checkpoint, versions.
+- `policy.json`: the task and its constructor's arguments (`env_kwargs`), dimensions, the goal
+  box, {when}the checkpoint, versions.
 
 One episode with ONNX Runtime alone (run it in this folder; needs `gymnasium-robotics` and
 `onnxruntime`):

@@ -24,6 +24,7 @@ import torch
 from dtd.agents.interface import Agent
 from dtd.agents.records import Episodes
 from dtd.envs.spec import EnvSpec
+from dtd.errors import DtdError, MachineError
 from dtd.training.rollout import run_episodes
 
 ExploringSide = Callable[[], tuple[list[gym.Env], Agent, EnvSpec, np.random.Generator]]
@@ -163,6 +164,8 @@ class ProcessCollector:
             raise CollectorProcessError(
                 f"the collecting process ended unexpectedly (exit code {self._process.exitcode})"
             ) from None
+        if status == "refused":  # the user's to fix, said in one line as inline collection says it
+            raise reply
         if status == "error":
             raise CollectorProcessError(f"the collecting process failed:\n{reply}")
         return reply
@@ -175,8 +178,8 @@ def _serve(conn: multiprocessing.connection.Connection, exploring_side: Explorin
     torch.set_num_threads(1)
     try:
         envs, agent, spec, rng = exploring_side()
-    except Exception:
-        conn.send(("error", traceback.format_exc()))
+    except Exception as exc:
+        conn.send(_failure(exc))
         return
     collector = InlineCollector(envs, agent, spec, rng)
     conn.send(("ok", None))
@@ -200,9 +203,21 @@ def _serve(conn: multiprocessing.connection.Connection, exploring_side: Explorin
                     reply = None
                 else:
                     raise ValueError(f"unknown request {command!r}")
-            except Exception:
-                conn.send(("error", traceback.format_exc()))
+            except Exception as exc:
+                conn.send(_failure(exc))
             else:
                 conn.send(("ok", reply))
     finally:
         collector.close()
+
+
+def _failure(exc: Exception) -> tuple[str, Any]:
+    """What the collecting process sends of an exception: a user's error or the machine's
+    itself (raised again as it is by the learner), anything else its traceback."""
+    if isinstance(exc, DtdError | MachineError):
+        try:
+            pickle.dumps(exc)
+        except Exception:
+            return "error", traceback.format_exc()
+        return "refused", exc
+    return "error", traceback.format_exc()

@@ -23,7 +23,7 @@ from dtd.agents.interface import Agent
 from dtd.agents.networks import BoxActionHead, SubgoalHead
 from dtd.agents.segments import segment_bounds, segment_window_end
 from dtd.config import Algo, Collection, HighTarget, RelabelWindow, TrainConfig, with_algorithm_defaults
-from dtd.envs.make import make_envs
+from dtd.envs.make import env_kwargs, make_envs
 from dtd.envs.spec import EnvSpec, goal_functions
 from dtd.errors import ConfigError
 from dtd.training.collector import Collector, InlineCollector, ProcessCollector
@@ -151,7 +151,7 @@ def build(
     if eval_seed is not None:
         eval_seq = np.random.SeedSequence([eval_seed, 1])
     n_eval = eval_envs or min(config.test_episodes, config.episodes_per_cycle)
-    evaluation, spec = seeded_envs(config.env, n_eval, eval_seq)
+    evaluation, spec = seeded_envs(config, n_eval, eval_seq)
     if config.buffer_size < spec.horizon:
         close_envs(evaluation)
         raise ConfigError(
@@ -203,9 +203,12 @@ def usable_cores() -> int:
     return os.cpu_count() or 1
 
 
-def seeded_envs(env_id: str, count: int, seeds: np.random.SeedSequence) -> tuple[list[gym.Env], EnvSpec]:
-    """``count`` environments of ``env_id``, each reset once with its own seed from ``seeds``."""
-    envs, spec = make_envs(env_id, count)
+def seeded_envs(
+    config: TrainConfig, count: int, seeds: np.random.SeedSequence
+) -> tuple[list[gym.Env], EnvSpec]:
+    """``count`` environments of ``config``'s task, each reset once with its own seed from
+    ``seeds``."""
+    envs, spec = make_task_envs(config, count)
     for env, seed in zip(envs, seeds.generate_state(count), strict=True):
         env.reset(seed=int(seed))
     return envs, spec
@@ -220,10 +223,16 @@ def _exploring_side(
     """The training environments and exploration generator; with no ``agent``, also a copy
     that only acts (in a collecting process: it holds no replay)."""
     assert config.env is not None
-    train, spec = seeded_envs(config.env, config.episodes_per_cycle, train_seq)
+    train, spec = seeded_envs(config, config.episodes_per_cycle, train_seq)
     if agent is None:
         agent = build_agent(dataclasses.replace(config, buffer_size=spec.horizon), spec, train[0])
     return train, agent, spec, np.random.default_rng(explore_seq)
+
+
+def make_task_envs(config: TrainConfig, count: int) -> tuple[list[gym.Env], EnvSpec]:
+    """``count`` environments of ``config.env`` made with ``config.env_kwargs``, and the spec."""
+    assert config.env is not None
+    return make_envs(config.env, count, env_kwargs(config.env_kwargs))
 
 
 def close_all(components: Components) -> None:

@@ -10,12 +10,11 @@ from pathlib import Path
 from typing import Any
 
 from dtd.config import Preset, TrainConfig, flat_items, preset_config, with_algorithm_defaults
-from dtd.envs.make import make_envs
 from dtd.envs.spec import EnvSpec
 from dtd.errors import CheckpointError, ConfigError, RunDirError, WorkerLost
 from dtd.training.atomic import remove_stale_temporaries
 from dtd.training.checkpoint import FORMAT_VERSION, check_checkpoint, load_checkpoint, restoring
-from dtd.training.components import Components, build, close_all, resolved_threads
+from dtd.training.components import Components, build, close_all, make_task_envs, resolved_threads
 from dtd.training.launch import launched_workers
 from dtd.training.progress import TrainingProgress
 from dtd.training.recorder import MetricsRecorder
@@ -254,7 +253,6 @@ def epochs_recorded(run_dir: Path) -> int:
 
 def env_spec_of(config: TrainConfig) -> EnvSpec:
     """The spec of ``config.env``, from a throw-away instance."""
-    assert config.env is not None
-    envs, spec = make_envs(config.env, 1)
+    envs, spec = make_task_envs(config, 1)
     envs[0].close()
     return spec

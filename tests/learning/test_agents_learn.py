@@ -94,3 +94,55 @@ def test_her_on_two_workers_reaches_90_percent_on_fetch_reach(tmp_path):
     figures = evaluate_run(run_dir, episodes=50, checkpoint="latest", seed=123)
     assert figures["env_steps"] == 6_000
     assert figures["success_rate"] >= 0.9, figures
+
+
+def start_values(agent, env, episodes: int = 50) -> dict[str, float]:
+    """The mean value each level's critic gives the start states of ``episodes`` resets, for the
+    action (and sub-goal) its actor would take."""
+    low = agent.learner if hasattr(agent, "learner") else agent.low
+    values: dict[str, list[float]] = {"low": [], "high": []}
+    for episode in range(episodes):
+        observation, _ = env.reset(seed=2_000 + episode)
+        obs, goal = observation["observation"][None], observation["desired_goal"][None]
+        values["low"].append(float(low.q_values(obs, goal, low.act(obs, goal))[0]))
+        if hasattr(agent, "high"):
+            subgoal = agent.propose_subgoals(obs, observation["achieved_goal"][None], goal)
+            values["high"].append(float(agent.subgoal_values(observation, goal, subgoal)[0]))
+    return {level: float(np.mean(found)) for level, found in values.items() if found}
+
+
+@pytest.mark.parametrize("algo", [Algo.her, Algo.dtd])
+def test_agents_learn_a_task_that_ends_on_reaching_the_goal(tmp_path, algo):
+    # PointGoalEndsOnSuccess-v0 ends an episode when its goal is reached and pays 0/1 (as the
+    # mazes with continuing_task=False): a return is at most the one success reward. The
+    # critics must say so: where the terminal transition bootstraps, the value of what follows
+    # the goal is added (with it, the start values rose to 2-4, toward 1/(1-gamma) = 20), and
+    # with the old -1/0 return clip no value could rise above 0.
+    # A small action penalty: returns here are at most 1, not -1/(1-gamma) as with -1/0 rewards
+    # on a task that runs on, and the reference weight of 1 held every action near zero.
+    learner = LearnerConfig(hidden_sizes=(64, 64), batch_size=128, action_l2=0.05)
+    config = TrainConfig(
+        env="tests.goal_envs:PointGoalEndsOnSuccess-v0",
+        algo=algo,
+        seed=0,
+        epochs=8,
+        n_cycles=10,
+        episodes_per_cycle=4,
+        test_episodes=20,
+        threads=1,
+        collector=Collection.inline,
+        subgoal_max_distance=0.5,
+        subgoal_eps_decay_epochs=4,
+        learner=learner,
+        high=dataclasses.replace(learner, batch_size=64),
+    )
+    state = train(config, run_dir=tmp_path / "run", show_progress=False)
+    # Episodes end on success, so the run took fewer steps than 8 x 10 x 4 x 20.
+    assert state.env_steps < 6_400
+    figures = evaluate_run(tmp_path / "run", episodes=100, checkpoint="latest", seed=123)
+    assert figures["success_rate"] >= 0.9, figures
+    agent, env = load_agent(tmp_path / "run")
+    values = start_values(agent, env)
+    env.close()
+    for level, value in values.items():
+        assert 0.05 <= value <= 1.05, (level, values)

@@ -96,6 +96,12 @@ class Explorer:
         self.no_map_reason = ""
         if self.config.algo is not Algo.dtd:
             self.no_map_reason = f"a {self.config.algo.value} run has no high level to map"
+        elif self.table is None and self.spec.goal_dim == 2 and self.spec.quaternion is None:
+            self.no_map_reason = (
+                "this task's goals are points on a plane with no block to place by hand; `dtd heatmap` "
+                "maps the high level's values from the task's own start and goal, and the plans and "
+                "videos here show what it asks for"
+            )
         elif self.table is None:
             self.no_map_reason = (
                 "this task's goal is not a point on a table (for the Hand tasks it is the "

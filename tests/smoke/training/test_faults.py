@@ -184,7 +184,7 @@ def test_an_unknown_checkpoint_name_lists_the_names(reach_run):
     one_error_line(dtd("eval", reach_run, "--checkpoint", "nosuch"), 2, "latest, best, first")
 
 
-def train_on_test_env(env_id: str, run_dir: Path) -> subprocess.CompletedProcess[str]:
+def train_on_test_env(env_id: str, run_dir: Path, *options: str) -> subprocess.CompletedProcess[str]:
     """`dtd train` on an environment of tests/goal_envs.py (importable from the repository)."""
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[3])}
     command = [
@@ -197,20 +197,34 @@ def train_on_test_env(env_id: str, run_dir: Path) -> subprocess.CompletedProcess
         "--epochs",
         "1",
         *TINY,
+        *options,
     ]
     return subprocess.run([*command, "--run-dir", str(run_dir)], capture_output=True, text=True, env=env)
 
 
-def test_an_environment_that_ends_episodes_early_or_reports_no_success_is_refused(tmp_path):
+@pytest.mark.parametrize("collector", ["inline", "process"])
+def test_an_episode_ended_for_another_reason_than_its_goal_is_refused_in_one_line(tmp_path, collector):
+    # The same line and exit status whether episodes are collected inline or in a process.
+    ended = train_on_test_env("PointGoalTerminating-v0", tmp_path / "ended", "--collector", collector)
+    one_error_line(ended, 2, "ended an episode at step 4 of 10 for another reason than reaching its goal")
+    assert "Traceback" not in ended.stderr and "collecting process" not in ended.stderr
+
+
+def test_a_task_without_compute_terminated_that_runs_on_after_success_is_refused(tmp_path):
+    # Without compute_terminated a task is taken to end its episodes on success; one that does
+    # not is told how to say so.
     one_error_line(
-        train_on_test_env("PointGoalTerminating-v0", tmp_path / "ended"),
+        train_on_test_env("PointGoalUndeclared-v0", tmp_path / "undeclared", "--n-cycles", "10"),
         2,
-        "ended an episode at step 4 of 10",
+        "did not end an episode whose goal was reached",
     )
+
+
+def test_an_environment_that_reports_no_success_is_refused(tmp_path):
     one_error_line(
         train_on_test_env("PointGoalNoSuccess-v0", tmp_path / "silent"),
         2,
-        "does not report info['is_success']",
+        "does not report info['is_success'] (or info['success'])",
     )
     assert not (tmp_path / "silent").exists()
     fine = train_on_test_env("PointGoal-v0", tmp_path / "fine")

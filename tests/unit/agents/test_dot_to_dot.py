@@ -20,6 +20,7 @@ from dtd.agents.segments import (
     segment_mean_reward,
     segment_of_step,
     segment_window_end,
+    segments_begun,
     subgoal_placement,
 )
 from dtd.config import LearnerConfig
@@ -423,3 +424,50 @@ def test_pose_sub_goals_are_reported_as_angles_along_the_rotation_to_the_goal():
     assert plan["angles"]["subgoal_to_goal"][0] == 45.0 and plan["angles"]["final_to_goal"] == 0.0
     assert plan["reached"] == [False, True]
     assert agent.placement_by_distance(episodes)[0]["goal_angle"] == [90.0, 90.0]  # degrees
+
+
+def test_segments_of_episodes_ended_inside_a_segment():
+    # T = 10, three segments at 0, 3, 7 (bounds rounded): one episode full, one ended at step 5
+    # (inside the second segment), one at step 2 (inside the first).
+    bounds = segment_bounds(T, 3)
+    assert bounds.tolist() == [0, 3, 7, 10]
+    episodes = labelled_episodes(3)
+    lengths = np.array([10, 5, 2])
+    achieved = episodes.achieved_goal.copy()
+    for i, end in enumerate(lengths):
+        achieved[i, end + 1 :] = achieved[i, end]
+    episodes = episodes._replace(achieved_goal=achieved, length=lengths)
+    assert segments_begun(bounds, lengths).tolist() == [3, 2, 1]
+    batch = sample_segment_transitions(
+        episodes, bounds, 6000, np.random.default_rng(0), 0.0, 0.0, reached_reward
+    )
+    episode, start = batch.obs[:, 0].astype(int) // 10, batch.obs[:, 1].astype(int) // 10
+    ends = (batch.next_obs[:, 1] / 10).astype(int)
+    # Only segments begun: uniform over the six (episode, segment) pairs.
+    pairs = set(zip(episode.tolist(), start.tolist(), strict=True))
+    assert pairs == {(0, 0), (0, 3), (0, 7), (1, 0), (1, 3), (2, 0)}
+    # A segment the episode's end cut short ends there.
+    assert np.all(ends[(episode == 1) & (start == 3)] == 5)
+    assert np.all(ends[(episode == 2) & (start == 0)] == 2)
+    assert np.all(ends[(episode == 0) & (start == 3)] == 7)
+
+
+def test_a_segment_is_terminal_where_its_goal_ends_the_episode_and_averages_until_then():
+    bounds = segment_bounds(T, 2)
+    episodes = labelled_episodes(1)
+    episodes = episodes._replace(length=np.array([8]))
+
+    def reached(achieved: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(achieved - goal, axis=-1) <= 1e-6
+
+    # Relabelled goals are achieved goals: one of step t' ends the episode for it at t' - 1.
+    batch = sample_segment_transitions(
+        episodes, bounds, 3000, np.random.default_rng(1), 1.0, 0.0, reached_reward, terminal_fn=reached
+    )
+    start, goal_step = batch.obs[:, 1].astype(int) // 10, batch.goal[:, 1].astype(int)
+    in_segment = goal_step <= np.minimum(start + 5, 8)
+    assert np.array_equal(batch.terminal == 1.0, in_segment)
+    # Mean reward over the steps up to the goal's: -1 for each step before, 0 at it.
+    steps = goal_step - start
+    want = np.where(in_segment, -(steps - 1) / steps, -1.0)
+    assert batch.reward == pytest.approx(want)

@@ -145,3 +145,88 @@ def test_n_step_transitions_sum_discounted_rewards_up_to_the_episode_end():
     assert set(np.unique(steps)) == {1, 2, 3}  # cut at the episode's end
     one_step = sample_transitions(labelled_episodes(), 50, np.random.default_rng(7), 1.0, exact_reward)
     assert one_step.discount is None
+
+
+def cut(episodes: Episodes, lengths: list[int]) -> Episodes:
+    """``episodes`` ended after ``lengths`` steps, padded as the rollout pads them (the end
+    repeated): values past an episode's end are marked 99 in obs, to catch padding drawn."""
+    obs, achieved = episodes.obs.copy(), episodes.achieved_goal.copy()
+    for i, end in enumerate(lengths):
+        achieved[i, end + 1 :] = achieved[i, end]
+        obs[i, end + 1 :] = 99.0
+    return episodes._replace(obs=obs, achieved_goal=achieved, length=np.asarray(lengths))
+
+
+def reached_exactly(achieved: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    return np.linalg.norm(achieved - goal, axis=-1) <= 1e-6
+
+
+def test_steps_of_mixed_lengths_are_drawn_uniformly_and_never_padding():
+    episodes = cut(labelled_episodes(3), [10, 2, 5])
+    batch = sample_transitions(episodes, 17_000, np.random.default_rng(0), 0.8, exact_reward)
+    episode, t = batch.obs[:, 0].astype(int) // 10, batch.obs[:, 1].astype(int) // 10
+    assert np.all(t < np.array([10, 2, 5])[episode])  # no step past an episode's end
+    assert not np.any(batch.next_obs == 99.0)
+    # Uniform over the 17 stored steps: each episode in proportion to its length.
+    shares = np.bincount(episode, minlength=3) / len(episode)
+    assert shares == pytest.approx([10 / 17, 2 / 17, 5 / 17], abs=0.01)
+    # Relabelled goals come from the episode's own steps, up to its end and not beyond.
+    relabelled = batch.goal[:, 2] == 0.0
+    assert np.all(batch.goal[relabelled, 0] == episode[relabelled])
+    future = batch.goal[relabelled, 1]
+    assert np.all(future > t[relabelled]) and np.all(future <= np.array([10, 2, 5])[episode[relabelled]])
+
+
+def test_full_episodes_are_drawn_as_before_episodes_could_end():
+    # Every episode at the time limit: an episode, then a step, as runs written before drew them.
+    episodes = labelled_episodes(4)
+    batch = sample_transitions(episodes, 64, np.random.default_rng(3), 0.8, exact_reward)
+    rng = np.random.default_rng(3)
+    episode, t = rng.integers(0, 4, size=64), rng.integers(0, T, size=64)
+    assert np.array_equal(batch.obs, episodes.obs[episode, t])
+
+
+def test_a_transition_is_terminal_exactly_where_its_goal_ends_the_episode():
+    episodes = cut(labelled_episodes(2), [10, 4])
+    batch = sample_transitions(
+        episodes, 4000, np.random.default_rng(1), 0.8, exact_reward, terminal_fn=reached_exactly
+    )
+    assert batch.terminal is not None
+    # For every goal, relabelled or the episode's own: terminal where the next achieved goal is it.
+    next_achieved = batch.next_obs[:, :3] / 10
+    assert np.array_equal(batch.terminal == 1.0, reached_exactly(next_achieved, batch.goal))
+    assert np.array_equal(batch.reward == 0.0, batch.terminal == 1.0)
+    # The cut episode's last transition toward a goal not reached there is a truncation.
+    last = (batch.obs[:, 0] == 10.0) & (batch.obs[:, 1] == 30.0)  # episode 1, t = 3
+    assert np.any(last & (batch.terminal == 0.0)) and np.any(last & (batch.terminal == 1.0))
+    # Without a terminal verdict (a task that runs on), nothing is terminal.
+    assert sample_transitions(episodes, 10, np.random.default_rng(1), 0.8, exact_reward).terminal is None
+
+
+def test_n_step_sums_stop_at_the_terminal_step_and_at_the_episode_end():
+    episodes = cut(labelled_episodes(1), [5])
+    # Goal (0, 2, 0), reached by step 1: from t = 0 the sum covers steps 0 and 1, then ends.
+    goal = np.array([[0.0, 2.0, 0.0]], np.float32)
+    episodes = episodes._replace(step_goal=np.repeat(goal[:, None], T, axis=1))
+    batch = sample_transitions(
+        episodes,
+        400,
+        np.random.default_rng(2),
+        0.0,
+        exact_reward,
+        n_step=3,
+        gamma=0.5,
+        terminal_fn=reached_exactly,
+    )
+    t = batch.obs[:, 1].astype(int) // 10
+    from_zero, from_one = t == 0, t == 1
+    assert np.all(batch.terminal[from_zero | from_one] == 1.0)
+    assert batch.reward[from_zero] == pytest.approx(-1.0)  # -1, then 0 at the goal; nothing after
+    assert batch.reward[from_one] == pytest.approx(0.0)
+    # From t = 3 of 5 steps: two rewards, then the episode's end, which bootstraps.
+    from_three = t == 3
+    assert np.all(batch.terminal[from_three] == 0.0)
+    assert batch.reward[from_three] == pytest.approx(-1.5) and batch.discount[from_three] == pytest.approx(
+        0.25
+    )
+    assert np.all(batch.next_obs[from_three, 1] == 50.0)
