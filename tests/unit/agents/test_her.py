@@ -230,3 +230,21 @@ def test_n_step_sums_stop_at_the_terminal_step_and_at_the_episode_end():
         0.25
     )
     assert np.all(batch.next_obs[from_three, 1] == 50.0)
+
+
+def test_a_reward_that_reaches_no_goal_is_refused():
+    from dtd.envs.goals import measure_rewards
+
+    class Constant:
+        unwrapped = None
+
+        def reset(self, seed=None):
+            return {"achieved_goal": np.zeros(2), "desired_goal": np.ones(2)}, {}
+
+        def compute_reward(self, achieved, goal, info):
+            return np.zeros(len(goal))
+
+    env = Constant()
+    env.unwrapped = env
+    with pytest.raises(Exception, match="same reward"):
+        measure_rewards(env, np.zeros(2), np.ones(2), None, "constant")
