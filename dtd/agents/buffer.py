@@ -58,6 +58,11 @@ class EpisodeBuffer:
         """Views of the stored episodes (in slot order, not age order)."""
         return Episodes(*(array[: self.size] for array in self._data))
 
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the buffer's arrays (allocated whole when it is made)."""
+        return sum(array.nbytes for array in self._data)
+
     def oldest_first(self) -> np.ndarray:
         """Indices into :meth:`stored` in the order the episodes were added."""
         return slots_oldest_first(self.size, self.episodes_added, self.next_index)
