@@ -47,7 +47,7 @@ def figures(run_dir: Path, episodes: int, samples: int) -> dict[str, dict[str, f
     result = {}
     for name, relabel in (("task's goal", 0.0), ("relabelled goal", 1.0)):
         batch = sample_segment_transitions(
-            recent, agent.bounds, samples, rng, relabel, 0.0, agent.reward_fn, gamma
+            recent, agent.bounds, samples, rng, relabel, 0.0, agent.goals.reward, gamma
         )
         rows = batch.next_value_given
         obs, goal, action = batch.obs[rows], batch.goal[rows], batch.action[rows]

@@ -270,14 +270,17 @@ def format_plan(number: int, plan: dict) -> str:
         return "(" + ", ".join(f"{v:.3f}" for v in values) + ")"
 
     angles = plan.get("angles")
+    steps = f" after {plan['steps']} steps" if "steps" in plan else ""
     lines = [
-        f"episode {number}: {'success' if plan['success'] else 'failure'}",
+        f"episode {number}: {'success' if plan['success'] else 'failure'}{steps}",
         f"  start    {point(plan['start'])}",
     ]
+    # No verdicts where the task's reward does not tell a goal reached (a dense reward).
+    verdicts = plan["reached"] or [None] * len(plan["subgoals"])
     for segment, (subgoal, end, reached) in enumerate(
-        zip(plan["subgoals"], plan["segment_ends"], plan["reached"], strict=True)
+        zip(plan["subgoals"], plan["segment_ends"], verdicts, strict=True)
     ):
-        verdict = "yes" if reached else "no"
+        verdict = "unknown" if reached is None else "yes" if reached else "no"
         lines.append(
             f"  segment {segment}: sub-goal {point(subgoal)}  reached: {verdict}, ended at {point(end)}"
         )

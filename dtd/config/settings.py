@@ -91,7 +91,9 @@ class LearnerConfig:
     gamma: float | None = None
     """Discount per step; None: 1 - 1/T, T being the episode's length in steps."""
     clip_return: bool = True
-    """Clip the critic's target to [-1/(1-gamma), 0], the range of returns of a -1/0 reward."""
+    """Clip the critic's target to the range of returns of the task's sparse reward, measured
+    from the task (-1/0: [-1/(1-gamma), 0]; 0/1: [0, 1/(1-gamma)]); a dense reward is not
+    clipped."""
     norm_clip: float = 5.0
     """Normalised inputs are clipped to [-norm_clip, norm_clip]."""
     obs_clip: float = 200.0

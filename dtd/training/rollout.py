@@ -102,10 +102,9 @@ def _check_ends(
     reached = terminal(achieved_goal, goal) if terminal is not None else np.zeros(len(goal), dtype=bool)
     if np.any(ended & ~reached):
         because = (
-            "the task's own verdict (compute_terminated) says its goal was not reached there"
+            "its compute_terminated says the goal was not reached there"
             if spec.ends_on_goal
-            else "the task does not end episodes on reaching a goal (its compute_terminated answers "
-            "False for a reached goal, or it defines none and its reward does not tell success)"
+            else "it ends no episode on reaching its goal, by its compute_terminated or its reward"
         )
         raise EnvError(
             f"environment {spec.env_id!r} ended an episode at step {step} of {spec.horizon} for "
