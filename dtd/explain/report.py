@@ -201,7 +201,7 @@ def _heatmap_section(run: RunDir, checkpoint: str, resolution: int, assets: list
 
     checkpoints = ("first", checkpoint) if run.first.exists() and checkpoint != "first" else (checkpoint,)
     try:
-        path, _ = run_heatmaps(
+        path, columns = run_heatmaps(
             run.root, run.root / ASSETS / "heatmaps.png", checkpoints, resolution=resolution
         )
     except EnvError as exc:
@@ -209,10 +209,15 @@ def _heatmap_section(run: RunDir, checkpoint: str, resolution: int, assets: list
             "The high level's values", f"<p>No heatmap for this task: {html.escape(str(exc))}</p>"
         )
     assets.append(path)
+    planar = bool(columns) and columns[0][1][0].z is None
+    where = (
+        "over the task's goal box, from its own start (black) and goal (red)"
+        if planar
+        else "over the table, with the block in one corner and the goal in the other"
+    )
     text = (
-        "<p>The high level's critic Q1(o, g, sub-goal) for every sub-goal on a grid over the table, "
-        "with the block in one corner and the goal in the other; the cross marks the sub-goal the "
-        "agent would choose."
+        f"<p>The high level's critic Q1(o, g, sub-goal) for every sub-goal on a grid {where}; the "
+        "cross marks the sub-goal the agent would choose."
         + (" Left: after the first epoch; right: at the checkpoint shown." if len(checkpoints) > 1 else "")
         + "</p>"
     )

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -115,6 +116,18 @@ def test_the_constructor_arguments_are_recorded_and_used_again(maze_run):
     assert spec["horizon"] == 30 and spec["ends_on_goal"] is True and spec["sparse_rewards"] == [0.0, 1.0]
     result = dtd("eval", maze_run, "--episodes", "2")
     assert result.returncode == 0, result.stderr
+    result = dtd("report", maze_run, "--episodes", "1", "--resolution", "8")
+    assert result.returncode == 0, result.stderr
+    assert "goal box" in (maze_run / "report.html").read_text()
+
+
+def test_resume_makes_the_task_with_its_constructor_arguments(maze_run, tmp_path):
+    copy = tmp_path / "copy"
+    shutil.copytree(maze_run, copy)
+    (copy / ".trainer.lock").unlink(missing_ok=True)
+    result = dtd("train", "--resume", copy, "--epochs", "3", "--no-progress")
+    assert result.returncode == 0, result.stderr
+    assert [int(row["epoch"]) for row in read_metrics(copy)] == [1, 2, 3]
 
 
 def test_render_heatmap_and_export_run_on_the_maze(maze_run, tmp_path):
