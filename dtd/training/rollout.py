@@ -96,8 +96,9 @@ def _check_ends(
     step: int,
 ) -> None:
     """Refuse episodes whose end (or its absence) after ``step`` steps is not the task's verdict
-    on the goal: dtd learns from tasks that end an episode only on reaching its goal."""
-    if not len(goal):
+    on the goal: dtd learns from tasks that end an episode only on reaching its goal. At the time
+    limit any end is the limit's (a transition that bootstraps, as it always did)."""
+    if not len(goal) or step >= spec.horizon:
         return
     reached = terminal(achieved_goal, goal) if terminal is not None else np.zeros(len(goal), dtype=bool)
     if np.any(ended & ~reached):
@@ -113,10 +114,11 @@ def _check_ends(
         )
     if np.any(reached & ~ended):
         raise EnvError(
-            f"environment {spec.env_id!r} did not end an episode whose goal was reached at step {step}; "
-            "an environment that defines no compute_terminated is taken to end its episodes on "
-            "success: give it compute_terminated(achieved_goal, desired_goal, info) (returning False "
-            "where episodes run to the time limit, as Gymnasium-Robotics' Fetch and Hand tasks do)"
+            f"environment {spec.env_id!r} did not end an episode at step {step} where its goal was "
+            "reached by its own verdict (its compute_terminated, or success where it defines none, "
+            "which dtd takes as the end): an environment whose episodes run to the time limit says so "
+            "by a compute_terminated(achieved_goal, desired_goal, info) that returns False, as "
+            "Gymnasium-Robotics' Fetch and Hand tasks do"
         )
 
 
