@@ -121,3 +121,9 @@ gym.register(
 gym.register(
     "PointGoalDense-v0", entry_point=PointGoalEnv, max_episode_steps=10, kwargs={"reward_type": "dense"}
 )
+gym.register(
+    "PointGoalUndeclared-v0",
+    entry_point=PointGoalEnv,
+    max_episode_steps=10,
+    kwargs={"define_terminated": False},
+)

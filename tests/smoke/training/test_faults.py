@@ -216,7 +216,8 @@ def test_a_task_without_compute_terminated_that_runs_on_after_success_is_refused
     one_error_line(
         train_on_test_env("PointGoalUndeclared-v0", tmp_path / "undeclared", "--n-cycles", "10"),
         2,
-        "did not end an episode whose goal was reached",
+        "did not end an episode at step",
+        "returns False",
     )
 
 
