@@ -137,6 +137,12 @@ def _compute_terminated(env: gym.Env) -> Callable[..., Any] | None:
         method(probe, probe, None)
     except NotImplementedError:  # Gymnasium-Robotics' GoalEnv declares it without a body
         return None
+    except Exception as exc:
+        raise EnvError(
+            f"environment {env.spec.id if env.spec else env!r}: compute_terminated(achieved_goal, "
+            f"desired_goal, info) fails on goals with info None ({exc}); dtd asks it of relabelled "
+            "goals, which have no info"
+        ) from exc
     return method
 
 
