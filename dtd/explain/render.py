@@ -27,6 +27,8 @@ from dtd.training.rollout import run_episodes
 
 GOAL_RGBA = (0.9, 0.05, 0.05, 1.0)
 SUBGOAL_RGBA = (0.05, 0.85, 0.05, 1.0)
+PLANAR_SUBGOAL_RGBA = (0.1, 0.35, 1.0, 1.0)
+"""The sub-goal's dot where goals are points on a plane: blue, since the mazes' ball is green."""
 GHOST_SUBGOAL_RGBA = (0.1, 0.9, 0.1, 0.5)
 DOT_RADIUS = 0.025
 GHOST_HALF_SIZE = 0.025
@@ -136,13 +138,13 @@ PLANAR_DOT_RADIUS = 0.1
 """Radius of the dots of planar goals (x, y), as the mazes' with cells a metre wide."""
 
 
-def _in_space(point: np.ndarray) -> np.ndarray:
+def _in_space(point: np.ndarray, height: float = PLANAR_DOT_RADIUS) -> np.ndarray:
     """A goal's position as a point in space: its first three entries, or for a planar goal
-    (x, y) that point just above the floor."""
+    (x, y) that point ``height`` above the floor."""
     point = np.asarray(point, dtype=np.float64)
     if len(point) >= 3:
         return point[:3]
-    return np.concatenate([point, np.zeros(2 - len(point)), [PLANAR_DOT_RADIUS]])
+    return np.concatenate([point, np.zeros(2 - len(point)), [height]])
 
 
 def goal_markers(env: gym.Env, spec: EnvSpec, goal: np.ndarray, subgoal: np.ndarray | None) -> list[Marker]:
@@ -153,10 +155,12 @@ def goal_markers(env: gym.Env, spec: EnvSpec, goal: np.ndarray, subgoal: np.ndar
     own beside it.
     """
     if spec.quaternion is None:
-        radius = DOT_RADIUS if len(goal) >= 3 else PLANAR_DOT_RADIUS
+        planar = len(goal) < 3
+        radius, colour = (PLANAR_DOT_RADIUS, PLANAR_SUBGOAL_RGBA) if planar else (DOT_RADIUS, SUBGOAL_RGBA)
         markers = [Marker(_in_space(goal), GOAL_RGBA, radius)]
         if subgoal is not None:
-            markers.append(Marker(_in_space(subgoal), SUBGOAL_RGBA, radius * 0.8))
+            # Above the goal's dot and the mazes' ball, so that from above it shows where they meet.
+            markers.append(Marker(_in_space(subgoal, 4 * PLANAR_DOT_RADIUS), colour, radius * 0.8))
         return markers
     if subgoal is None:
         return []
@@ -255,12 +259,18 @@ def key_frames(
     return frames
 
 
-def marker_legend(rotation: bool, subgoals: bool) -> str:
-    """What the markers of a rendered episode stand for."""
+def marker_legend(rotation: bool, subgoals: bool, planar: bool = False) -> str:
+    """What the markers of a rendered episode stand for (``planar``: goals are points x, y)."""
     if rotation:
         legend = "the task's ghost block = goal"
         return legend + (", green block = current sub-goal" if subgoals else "")
-    return "red = goal" + (", green = current sub-goal" if subgoals else "")
+    colour = "blue" if planar else "green"
+    return "red = goal" + (f", {colour} = current sub-goal" if subgoals else "")
+
+
+def is_planar(spec: EnvSpec) -> bool:
+    """Whether the task's goals are points on a plane (x, y), as the mazes' are."""
+    return spec.goal_dim == 2 and spec.quaternion is None
 
 
 def write_video(frames: Sequence[np.ndarray], path: Path, fps: int = 25) -> Path:
@@ -335,7 +345,8 @@ def render_run(
             name = f"episode-{number}"
             title = (
                 f"{loaded.config.algo.value} on {spec.env_id}, epoch {loaded.snapshot['state']['epoch']}, "
-                f"episode {number}: {marker_legend(spec.quaternion is not None, bounds is not None)}"
+                f"episode {number}: "
+                f"{marker_legend(spec.quaternion is not None, bounds is not None, is_planar(spec))}"
             )
             written.append(
                 RenderedFiles(

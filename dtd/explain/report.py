@@ -111,7 +111,8 @@ def write_report(
             + _image(files.strip, run.root, f"key frames of episode {number}")
             + f'<video controls preload="metadata" src="{_relative(files.video, run.root)}"></video>'
         )
-    legend = marker_legend(bool(spec.get("quaternion")), config.algo is Algo.dtd).capitalize() + "."
+    planar = spec.get("goal_dim") == 2 and not spec.get("quaternion")
+    legend = marker_legend(bool(spec.get("quaternion")), config.algo is Algo.dtd, planar).capitalize() + "."
     sections.append(_section("Episodes", f"<p>{legend}</p>" + "".join(parts)))
     sections.append(_section("Plans", _plans_table([files.plan for files in rendered])))
     sections.append(_section("Questioning the run", _explore_note(run, config, bool(spec.get("quaternion")))))

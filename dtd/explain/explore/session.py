@@ -118,6 +118,8 @@ class Explorer:
 
     def describe(self) -> dict[str, Any]:
         """The run, its task and its epochs, as the page needs them."""
+        from dtd.explain.render import is_planar, marker_legend
+
         epochs = self.epochs()
         info: dict[str, Any] = {
             "run": str(self.run.root),
@@ -128,6 +130,9 @@ class Explorer:
             "map": self.table is not None,
             "no_map_reason": self.no_map_reason,
             "placeable": self.placement_table is not None,
+            "legend": marker_legend(
+                self.spec.quaternion is not None, self.config.algo is Algo.dtd, is_planar(self.spec)
+            ),
             "resolution": MAP_RESOLUTION,
             "progress": self._progress(),
         }

@@ -81,6 +81,7 @@ def test_explore_plays_an_episode_of_the_maze(maze_run):
     with explorer(maze_run) as (url, process):
         status, run = get(url + "api/run")
         assert status == 200 and not run["map"] and "dtd heatmap" in run["no_map_reason"]
+        assert run["legend"] == "red = goal, blue = current sub-goal"
         status, episode = get(url + "api/episode", json.dumps({"epoch": 2}).encode())
         assert status == 200, episode
         assert 1 <= episode["plan"]["steps"] <= 30

@@ -374,8 +374,7 @@ async function start() {
   } else {
     $("map-area").hidden = true;
     $("episode-hint").textContent = "Plays one deterministic episode of the agent of the chosen epoch " +
-      "from the task's own random start and renders it; for a rotation goal the task's ghost " +
-      "block shows the goal and a green ghost block the sub-goal in force.";
+      `from the task's own random start and renders it: ${info.legend}.`;
   }
   if (!info.map) {
     $("no-map").hidden = false;
