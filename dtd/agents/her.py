@@ -51,19 +51,6 @@ def sample_steps(
     return episode, flat - (ends[episode] - length[episode])
 
 
-def _window(
-    episode: np.ndarray, start: np.ndarray, stop: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For steps t = start .. stop-1 of each row, as (B, L) for the longest window L: the index
-    of the achieved goal each step reached (t + 1; padding repeats the last), each row's
-    episode, and the mask of the steps inside the row's window."""
-    longest = int(np.max(stop - start))
-    offsets = np.arange(longest)[None, :]
-    inside = offsets < (stop - start)[:, None]
-    reached = np.minimum(start[:, None] + 1 + offsets, stop[:, None])
-    return reached, np.broadcast_to(episode[:, None], reached.shape), inside
-
-
 def window_rewards(
     achieved_goal: np.ndarray,
     episode: np.ndarray,
@@ -71,38 +58,30 @@ def window_rewards(
     stop: np.ndarray,
     goal: np.ndarray,
     reward_fn: RewardFn,
-) -> tuple[np.ndarray, np.ndarray]:
+    terminal_fn: GoalTest | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Rewards of steps t = start .. stop-1 of each row's episode against its goal,
     reward_fn(achieved_goal[episode, t + 1], goal), as (B, L) for the longest window L, and the
-    (B, L) mask of the steps inside each row's window (the rest are padding)."""
-    reached, episodes, inside = _window(episode, start, stop)
-    batch, longest = reached.shape
-    rewards = reward_fn(
-        achieved_goal[episodes, reached].reshape(-1, goal.shape[-1]), np.repeat(goal, longest, axis=0)
-    ).reshape(batch, longest)
-    return rewards, inside
+    (B, L) mask of the steps inside each row's window (the rest are padding).
 
-
-def window_until_terminal(
-    achieved_goal: np.ndarray,
-    episode: np.ndarray,
-    start: np.ndarray,
-    stop: np.ndarray,
-    goal: np.ndarray,
-    terminal_fn: GoalTest,
-) -> tuple[np.ndarray, np.ndarray]:
-    """The (B, L) mask of the steps of each row's window (as :func:`window_rewards`) up to and
-    including the first whose achieved goal ends the episode for the row's goal, and (B,)
-    whether there is such a step: the task would have ended the episode there."""
-    reached, episodes, inside = _window(episode, start, stop)
-    batch, longest = reached.shape
-    ends = terminal_fn(
-        achieved_goal[episodes, reached].reshape(-1, goal.shape[-1]), np.repeat(goal, longest, axis=0)
-    ).reshape(batch, longest)
-    ends = ends & inside
+    With ``terminal_fn`` the mask stops at (and includes) the first step whose achieved goal
+    ends the episode for the row's goal, and the third value is (B,) whether there is such a
+    step: the task would have ended the episode there (None without ``terminal_fn``).
+    """
+    longest = int(np.max(stop - start))
+    offsets = np.arange(longest)[None, :]
+    inside = offsets < (stop - start)[:, None]
+    reached = np.minimum(start[:, None] + 1 + offsets, stop[:, None])  # padding repeats the last
+    batch, goal_dim = goal.shape
+    achieved = achieved_goal[episode[:, None], reached].reshape(-1, goal_dim)
+    goals = np.repeat(goal, longest, axis=0)
+    rewards = reward_fn(achieved, goals).reshape(batch, longest)
+    if terminal_fn is None:
+        return rewards, inside, None
+    ends = terminal_fn(achieved, goals).reshape(batch, longest) & inside
     terminal = ends.any(axis=1)
     first = np.where(terminal, ends.argmax(axis=1), longest)
-    return inside & (np.arange(longest)[None, :] <= first[:, None]), terminal
+    return rewards, inside & (offsets <= first[:, None]), terminal
 
 
 def sample_transitions(
@@ -141,7 +120,7 @@ def sample_transitions(
     uniform = rng.random(batch_size)
 
     end = np.full(batch_size, horizon) if window_end is None else np.asarray(window_end)[t]
-    end = end if episodes.full else np.minimum(end, length[episode])
+    end = np.minimum(end, length[episode])
     future = future_indices(t, end, uniform)
     goal = episodes.step_goal[episode, t].copy()
     goal[relabel] = episodes.achieved_goal[episode[relabel], future[relabel]]
@@ -158,12 +137,10 @@ def sample_transitions(
             terminal = terminal_fn(reached, goal).astype(np.float32)
     else:
         next_t = np.minimum(t + n_step, length[episode])
-        rewards, inside = window_rewards(episodes.achieved_goal, episode, t, next_t, goal, reward_fn)
-        if terminal_fn is not None:
-            inside, ends = window_until_terminal(
-                episodes.achieved_goal, episode, t, next_t, goal, terminal_fn
-            )
-            terminal = ends.astype(np.float32)
+        rewards, inside, ends = window_rewards(
+            episodes.achieved_goal, episode, t, next_t, goal, reward_fn, terminal_fn
+        )
+        terminal = None if ends is None else ends.astype(np.float32)
         discounts = gamma ** np.arange(rewards.shape[1], dtype=np.float64)
         reward = np.sum(rewards * discounts * inside, axis=1).astype(np.float32)
         discount = (gamma ** (next_t - t).astype(np.float64)).astype(np.float32)

@@ -35,11 +35,6 @@ class Episodes(NamedTuple):
         """Number of episodes B."""
         return self.obs.shape[0]
 
-    @property
-    def full(self) -> bool:
-        """Whether every episode ran the whole horizon T."""
-        return bool(np.all(self.length == self.action.shape[1]))
-
     def final_distance(self) -> np.ndarray:
         """(B,) Euclidean distance between the last achieved goal and the task's goal."""
         return np.linalg.norm(self.achieved_goal[:, -1] - self.desired_goal, axis=-1)

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from dtd.agents.her import future_indices, sample_steps, window_rewards, window_until_terminal
+from dtd.agents.her import future_indices, sample_steps, window_rewards
 from dtd.agents.records import Batch, Episodes
 from dtd.agents.rotations import angle_between, rotation_placement
 from dtd.envs.goals import GoalTest, RewardFn
@@ -48,7 +48,7 @@ def segment_mean_reward(
     reward_fn: RewardFn,
 ) -> np.ndarray:
     """Mean over steps t = start .. stop-1 of reward_fn(achieved_goal[episode, t + 1], goal)."""
-    rewards, inside = window_rewards(achieved_goal, episode, start, stop, goal, reward_fn)
+    rewards, inside, _ = window_rewards(achieved_goal, episode, start, stop, goal, reward_fn)
     return np.sum(rewards * inside, axis=1) / (stop - start)
 
 
@@ -113,12 +113,12 @@ def sample_segment_transitions(
 
     subgoal = episodes.step_goal[episode, start].copy()
     subgoal[hindsight] = episodes.achieved_goal[episode[hindsight], stop[hindsight]]
-    rewards, inside = window_rewards(episodes.achieved_goal, episode, start, stop, goal, reward_fn)
-    steps, terminal = stop - start, None
-    if terminal_fn is not None:
-        inside, ends = window_until_terminal(episodes.achieved_goal, episode, start, stop, goal, terminal_fn)
-        steps, terminal = np.sum(inside, axis=1), ends.astype(np.float32)
-    reward = np.sum(rewards * inside, axis=1) / steps
+    rewards, inside, ends = window_rewards(
+        episodes.achieved_goal, episode, start, stop, goal, reward_fn, terminal_fn
+    )
+    # The mean over the segment's steps, up to the one that ended the episode for g.
+    reward = np.sum(rewards * inside, axis=1) / np.sum(inside, axis=1)
+    terminal = None if ends is None else ends.astype(np.float32)
     next_value, next_value_given = None, None
     if observed_gamma is not None:
         next_value_given = (segment == segments - 2) & (length == horizon)
