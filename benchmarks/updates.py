@@ -1,12 +1,15 @@
-"""Update speed: learner updates/s for the default networks and batch, and the FLOPs one
-update needs, against this machine's float32 matrix-multiply rate measured in the same run.
+"""Update speed of each learner (ddpg, td3, sac, tqc): ms per update for the given networks
+and batch, and the FLOPs one update needs against this machine's float32 matrix-multiply rate
+measured in the same run.
 
     python benchmarks/updates.py --updates 300
+    python benchmarks/updates.py --learners tqc --hidden-sizes 512 512 512 --batch-size 512
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import platform
 import time
 
@@ -14,10 +17,11 @@ import numpy as np
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
-from dtd.agents.ddpg import DDPGLearner
+from dtd.agents.learner import GoalLearner
+from dtd.agents.learners import make_learner
 from dtd.agents.networks import BoxActionHead
 from dtd.agents.records import Batch
-from dtd.config import LearnerConfig
+from dtd.config import LearnerConfig, LearnerKind
 
 OBS, GOAL, ACT = 25, 3, 4  # FetchPush
 
@@ -49,47 +53,51 @@ def main() -> None:
     )
     parser.add_argument("--updates", type=int, default=300)
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--learners", nargs="+", default=[kind.value for kind in LearnerKind])
+    parser.add_argument("--hidden-sizes", type=int, nargs="+", default=list(LearnerConfig.hidden_sizes))
+    parser.add_argument("--batch-size", type=int, default=LearnerConfig.batch_size)
     parser.add_argument("--compile", action="store_true", help="also time torch.compile'd networks")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
 
-    config = LearnerConfig()
+    base = LearnerConfig(hidden_sizes=tuple(args.hidden_sizes), batch_size=args.batch_size)
     rng = np.random.default_rng(0)
-    batches = [random_batch(rng, config.batch_size) for _ in range(args.updates)]
-    learner = fresh_learner(config, rng)
-    with FlopCounterMode(display=False) as counter:
-        learner.update(batches[0])
-    flops = counter.get_total_flops()
-    rates = {"eager": (update_rate(learner, batches), 0.0)}
-    if args.compile:
-        learner = fresh_learner(config, rng)
-        learner.compile()
-        start = time.perf_counter()
-        learner.update(batches[0])
-        learner.update(batches[1])  # the actor's own graph, compiled at its second use
-        compile_s = time.perf_counter() - start
-        rates["compiled"] = (update_rate(learner, batches), compile_s)
-
+    batches = [random_batch(rng, base.batch_size) for _ in range(args.updates)]
     big, layer = matmul_rate(1024), matmul_rate(256)
-    print(f"# DDPG update, {config.hidden_sizes} hidden, batch {config.batch_size}, "
+    print(f"# updates, {base.hidden_sizes} hidden, batch {base.batch_size}, "
           f"{args.threads} torch thread(s), {platform.machine()}, torch {torch.__version__}")  # fmt: skip
-    print(f"FLOPs per update (matmuls)        {flops / 1e6:10.1f} M")
-    print(f"float32 matmul 1024^3             {big / 1e9:10.2f} GFLOP/s")
-    print(f"float32 matmul 256^3              {layer / 1e9:10.2f} GFLOP/s")
-    for name, (rate, compile_s) in rates.items():
-        achieved = rate * flops
-        print(f"{name:<9} updates/s {rate:8.1f} ({1000 / rate:.2f} ms), {achieved / 1e9:6.2f} GFLOP/s = "
-              f"{achieved / big:6.1%} of 1024^3, {achieved / layer:6.1%} of 256^3"
-              + (f"; compiling took {compile_s:.1f} s" if compile_s else ""))  # fmt: skip
+    print(f"float32 matmul 1024^3 {big / 1e9:.2f} GFLOP/s, 256^3 {layer / 1e9:.2f} GFLOP/s")
+    print("| learner | mode | MFLOP per update | ms per update | GFLOP/s | of 1024^3 peak | of 256^3 |")
+    print("|---|---|---|---|---|---|---|")
+    for name in args.learners:
+        config = dataclasses.replace(base, learner=LearnerKind(name))
+        learner = fresh_learner(config, rng)
+        with FlopCounterMode(display=False) as counter:
+            learner.update(batches[0])
+        flops = counter.get_total_flops()
+        rates = {"eager": (update_rate(learner, batches), 0.0)}
+        if args.compile:
+            learner = fresh_learner(config, rng)
+            learner.compile()
+            start = time.perf_counter()
+            learner.update(batches[0])
+            learner.update(batches[1])  # the actor's own graph, compiled at its second use
+            compile_s = time.perf_counter() - start
+            rates["compiled"] = (update_rate(learner, batches), compile_s)
+        for mode, (rate, compile_s) in rates.items():
+            achieved = rate * flops
+            note = f" (compiling {compile_s:.0f} s)" if compile_s else ""
+            print(f"| {name} | {mode}{note} | {flops / 1e6:.1f} | {1000 / rate:.2f} | "
+                  f"{achieved / 1e9:.2f} | {achieved / big:.1%} | {achieved / layer:.1%} |")  # fmt: skip
 
 
-def fresh_learner(config: LearnerConfig, rng: np.random.Generator) -> DDPGLearner:
-    learner = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), config, gamma=0.98, sparse_rewards=(-1.0, 0.0))
+def fresh_learner(config: LearnerConfig, rng: np.random.Generator) -> GoalLearner:
+    learner = make_learner(OBS, GOAL, ACT, BoxActionHead(1.0), config, gamma=0.98, sparse_rewards=(-1.0, 0.0))
     learner.update_normalizers(rng.normal(size=(1000, OBS)), rng.normal(size=(1000, GOAL)))
     return learner
 
 
-def update_rate(learner: DDPGLearner, batches: list[Batch]) -> float:
+def update_rate(learner: GoalLearner, batches: list[Batch]) -> float:
     """Updates per second over ``batches``, after 10 warm-up updates."""
     for batch in batches[:10]:
         learner.update(batch)

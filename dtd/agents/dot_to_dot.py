@@ -8,13 +8,12 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-import torch
 
 from dtd.agents.buffer import EpisodeBuffer
-from dtd.agents.ddpg import DDPGLearner
 from dtd.agents.exploration import ActionNoise
 from dtd.agents.her import sample_transitions
 from dtd.agents.interface import mean_metrics
+from dtd.agents.learner import GoalLearner
 from dtd.agents.networks import SubgoalHead
 from dtd.agents.records import Batch, Episodes
 from dtd.agents.rotations import multiply, random_rotations
@@ -72,8 +71,8 @@ class DotToDotAgent:
 
     def __init__(
         self,
-        low: DDPGLearner,
-        high: DDPGLearner,
+        low: GoalLearner,
+        high: GoalLearner,
         buffer: EpisodeBuffer,
         goals: GoalFunctions,
         bounds: np.ndarray,
@@ -174,18 +173,19 @@ class DotToDotAgent:
         count, goal_dim = desired_goal.shape
         explore = self.exploration
         perturbed = achieved_goal + explore.sigma * rng.standard_normal((count, goal_dim))
-        proposed = self.propose_subgoals(obs, achieved_goal, desired_goal)
-        proposed = proposed + explore.noise * rng.standard_normal((count, goal_dim))
+        proposed = self.high.act(high_level_input(obs, achieved_goal), desired_goal, rng)
+        if not self.high.stochastic:  # a stochastic high level explores by its own samples
+            proposed = proposed + explore.noise * rng.standard_normal((count, goal_dim))
         take_perturbed = rng.random(count) < self.eps
         if explore.rotation_angle > 0.0 and self.quaternion is not None:
             first, stop = self.quaternion
             turns = random_rotations(rng, count, explore.rotation_angle)
             perturbed[:, first:stop] = multiply(achieved_goal[:, first:stop], turns)
         chosen = np.where(take_perturbed[:, None], perturbed, proposed)
-        return self.high.head.project(torch.as_tensor(chosen, dtype=torch.float32)).numpy()
+        return self.high.head.project(self.high.tensor(chosen)).cpu().numpy()
 
     def act(self, obs: np.ndarray, goal: np.ndarray, explore: bool, rng: np.random.Generator) -> np.ndarray:
-        action = self.low.act(obs, goal)
+        action = self.low.act(obs, goal, rng if explore else None)
         return self.action_noise(action, rng) if explore else action
 
     def _low_batch(self, episodes: Episodes, size: int, rng: np.random.Generator) -> Batch:

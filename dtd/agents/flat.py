@@ -7,10 +7,10 @@ from typing import Any
 import numpy as np
 
 from dtd.agents.buffer import EpisodeBuffer
-from dtd.agents.ddpg import DDPGLearner
 from dtd.agents.exploration import ActionNoise
 from dtd.agents.her import GoalStrategy, relabel_probability, sample_transitions
 from dtd.agents.interface import mean_metrics
+from dtd.agents.learner import GoalLearner
 from dtd.agents.records import Batch, Episodes
 from dtd.envs.goals import GoalFunctions
 
@@ -20,7 +20,7 @@ class GoalConditionedAgent:
 
     def __init__(
         self,
-        learner: DDPGLearner,
+        learner: GoalLearner,
         buffer: EpisodeBuffer,
         goals: GoalFunctions,
         noise: ActionNoise,
@@ -51,7 +51,7 @@ class GoalConditionedAgent:
         return desired_goal
 
     def act(self, obs: np.ndarray, goal: np.ndarray, explore: bool, rng: np.random.Generator) -> np.ndarray:
-        action = self.learner.act(obs, goal)
+        action = self.learner.act(obs, goal, rng if explore else None)
         return self.noise(action, rng) if explore else action
 
     def store(self, episodes: Episodes, rng: np.random.Generator) -> None:

@@ -68,11 +68,11 @@ class Agent(Protocol):
 
 
 def mean_metrics(per_update: Iterable[dict[str, float]]) -> dict[str, float]:
-    """The mean of each diagnostic over a series of updates (empty for no update)."""
+    """The mean of each diagnostic over the updates that report it (empty for no update)."""
     totals: dict[str, float] = {}
-    count = 0
+    counts: dict[str, int] = {}
     for metrics in per_update:
-        count += 1
         for name, value in metrics.items():
             totals[name] = totals.get(name, 0.0) + value
-    return {name: total / count for name, total in totals.items()}
+            counts[name] = counts.get(name, 0) + 1
+    return {name: total / counts[name] for name, total in totals.items()}

@@ -3,6 +3,7 @@ actor's output in [-1, 1] into an action of the level that uses it."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import torch
@@ -32,6 +33,11 @@ def xavier_initialise(module: nn.Module) -> None:
     for layer in module.modules():
         if isinstance(layer, nn.Linear):
             nn.init.xavier_uniform_(layer.weight)
+            nn.init.zeros_(layer.bias)
+        elif isinstance(layer, EnsembleLinear):
+            _, fan_in, fan_out = layer.weight.shape
+            bound = math.sqrt(6.0 / (fan_in + fan_out))
+            nn.init.uniform_(layer.weight, -bound, bound)
             nn.init.zeros_(layer.bias)
 
 
@@ -120,3 +126,101 @@ class SubgoalHead(nn.Module):
 
 
 ActionHead = BoxActionHead | SubgoalHead
+
+
+class EnsembleLinear(nn.Module):
+    """``members`` independent linear layers applied in one batched matmul: (N, B, in) to
+    (N, B, out). Each member is initialised as ``nn.Linear`` initialises one layer."""
+
+    def __init__(self, members: int, in_dim: int, out_dim: int) -> None:
+        super().__init__()
+        self.weight = nn.Parameter(torch.empty(members, in_dim, out_dim))
+        self.bias = nn.Parameter(torch.empty(members, 1, out_dim))
+        bound = 1.0 / in_dim**0.5
+        nn.init.uniform_(self.weight, -bound, bound)
+        nn.init.uniform_(self.bias, -bound, bound)
+
+    def forward(self, inputs: torch.Tensor) -> torch.Tensor:
+        return torch.baddbmm(self.bias, inputs, self.weight)
+
+
+class EnsembleLayerNorm(nn.Module):
+    """LayerNorm over the last dimension with a gain and bias of each member's own."""
+
+    def __init__(self, members: int, width: int) -> None:
+        super().__init__()
+        self.weight = nn.Parameter(torch.ones(members, 1, width))
+        self.bias = nn.Parameter(torch.zeros(members, 1, width))
+
+    def forward(self, inputs: torch.Tensor) -> torch.Tensor:
+        normal = nn.functional.layer_norm(inputs, inputs.shape[-1:])
+        return normal * self.weight + self.bias
+
+
+class CriticEnsemble(nn.Module):
+    """N critics of the same shape held as one module: Z(o || g, a) with ``outputs`` values
+    per critic (1: a Q-value; M: M quantiles of the return). Returns (B, N, outputs)."""
+
+    def __init__(
+        self,
+        input_dim: int,
+        action_features: int,
+        hidden_sizes: Sequence[int],
+        members: int,
+        outputs: int = 1,
+        layer_norm: bool = False,
+    ) -> None:
+        super().__init__()
+        self.members = members
+        layers: list[nn.Module] = []
+        width = input_dim + action_features
+        for hidden in hidden_sizes:
+            layers.append(EnsembleLinear(members, width, hidden))
+            if layer_norm:
+                layers.append(EnsembleLayerNorm(members, hidden))
+            layers.append(nn.ReLU())
+            width = hidden
+        layers.append(EnsembleLinear(members, width, outputs))
+        self.body = nn.Sequential(*layers)
+
+    def forward(self, inputs: torch.Tensor, action_features: torch.Tensor) -> torch.Tensor:
+        joint = torch.cat([inputs, action_features], dim=-1)
+        shared = joint.unsqueeze(0).expand(self.members, *joint.shape)
+        return self.body(shared).transpose(0, 1)
+
+
+class GaussianActor(nn.Module):
+    """A squashed Gaussian policy over o || g: unit = tanh(mean + std * noise), in [-1, 1]^d as
+    :class:`Actor`'s output, so the same heads map it to an action."""
+
+    LOG_STD_MIN = -5.0
+    LOG_STD_MAX = 2.0
+
+    def __init__(
+        self, input_dim: int, output_dim: int, hidden_sizes: Sequence[int], layer_norm: bool = False
+    ) -> None:
+        super().__init__()
+        self.output_dim = output_dim
+        self.body = mlp(input_dim, hidden_sizes, 2 * output_dim, layer_norm)
+
+    def distribution(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The Gaussian's mean and log std before squashing."""
+        mean, log_std = self.body(inputs).split(self.output_dim, dim=-1)
+        # A smooth bound on the log std (rather than a clamp) keeps its gradient everywhere.
+        log_std = self.LOG_STD_MIN + 0.5 * (self.LOG_STD_MAX - self.LOG_STD_MIN) * (torch.tanh(log_std) + 1)
+        return mean, log_std
+
+    def forward(self, inputs: torch.Tensor) -> torch.Tensor:
+        """The deterministic unit action: tanh of the mean."""
+        return torch.tanh(self.distribution(inputs)[0])
+
+    def sample(self, inputs: torch.Tensor, noise: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """A unit action drawn with standard normal ``noise`` (reparameterised) and its log
+        density, the tanh's change of volume included."""
+        mean, log_std = self.distribution(inputs)
+        pre_tanh = mean + log_std.exp() * noise
+        unit = torch.tanh(pre_tanh)
+        gaussian = -0.5 * noise.square() - log_std - 0.5 * math.log(2 * math.pi)
+        # log(1 - tanh(x)^2) = 2 (log 2 - x - softplus(-2x)), stable for large |x|.
+        squash = 2.0 * (math.log(2.0) - pre_tanh - nn.functional.softplus(-2.0 * pre_tanh))
+        return unit, (gaussian - squash).sum(dim=-1)

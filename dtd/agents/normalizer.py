@@ -17,17 +17,23 @@ class RunningNormalizer:
     """
 
     def __init__(
-        self, size: int, eps: float = 0.01, clip: float = 5.0, collective: Collective = ALONE
+        self,
+        size: int,
+        eps: float = 0.01,
+        clip: float = 5.0,
+        collective: Collective = ALONE,
+        device: torch.device | str = "cpu",
     ) -> None:
         self.size = size
+        self.device = torch.device(device)
         self.collective = collective
         self.eps = eps
         self.clip = clip
         self.sum = np.zeros(size, dtype=np.float64)
         self.sum_sq = np.zeros(size, dtype=np.float64)
         self.count = 0
-        self.mean = torch.zeros(size)
-        self.std = torch.ones(size)
+        self.mean = torch.zeros(size, device=self.device)
+        self.std = torch.ones(size, device=self.device)
 
     def update(self, values: np.ndarray) -> None:
         """Add a batch of vectors (any leading shape, last dimension ``size``)."""
@@ -49,8 +55,9 @@ class RunningNormalizer:
             return
         mean = self.sum / self.count
         var = np.maximum(self.sum_sq / self.count - np.square(mean), 0.0)
-        self.mean = torch.as_tensor(mean, dtype=torch.float32)
-        self.std = torch.as_tensor(np.maximum(np.sqrt(var), self.eps), dtype=torch.float32)
+        self.mean = torch.as_tensor(mean, dtype=torch.float32, device=self.device)
+        std = np.maximum(np.sqrt(var), self.eps)
+        self.std = torch.as_tensor(std, dtype=torch.float32, device=self.device)
 
     def normalize(self, values: torch.Tensor) -> torch.Tensor:
         """(values - mean) / std, clipped to [-clip, clip]."""
@@ -66,7 +73,13 @@ class RunningNormalizer:
 
     def load_state_dict(self, state: dict[str, object]) -> None:
         """Restore what :meth:`state_dict` returned."""
-        self.sum = np.asarray(state["sum"], dtype=np.float64).copy()
-        self.sum_sq = np.asarray(state["sum_sq"], dtype=np.float64).copy()
+        self.sum = _float64(state["sum"])
+        self.sum_sq = _float64(state["sum_sq"])
         self.count = int(state["count"])  # type: ignore[arg-type]
         self._refresh()
+
+
+def _float64(values: object) -> np.ndarray:
+    if isinstance(values, torch.Tensor):
+        values = values.cpu().numpy()
+    return np.asarray(values, dtype=np.float64).copy()

@@ -43,11 +43,14 @@ HIGH_LEVEL_HELP = {
 }
 """Help of the high level's settings where the low level's docstring would mislead."""
 
+TARGET_ENTROPY_HINT = ("FLOAT", "(default: minus the action's dimension)")
 LEARNER_HINTS = {
     "gamma": ("FLOAT", "(default: 1 - 1/T, T being the episode's length in steps)"),
+    "target_entropy": TARGET_ENTROPY_HINT,
 }
 HIGH_LEVEL_HINTS = {
     "gamma": ("FLOAT", "(default: the low level's discount to the power of a segment's steps)"),
+    "target_entropy": ("FLOAT", "(default: minus the goal's dimension)"),
 }
 """Metavar and hint of the learners' settings whose default (None) says nothing."""
 

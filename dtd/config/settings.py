@@ -60,6 +60,34 @@ class Collection(enum.Enum):
     """In a process of its own beside the learner, during the learner's updates."""
 
 
+class LearnerKind(enum.Enum):
+    """The off-policy learners every agent (and each level of Dot-to-Dot) can be built on."""
+
+    ddpg = "ddpg"
+    """DDPG: a deterministic actor and one critic, exploring by the action noise settings."""
+    td3 = "td3"
+    """TD3: twin critics and the lower of their targets, target-policy smoothing, an actor
+    that steps every ``--actor-delay`` updates (Fujimoto et al., 2018)."""
+    sac = "sac"
+    """SAC: a squashed Gaussian actor exploring by its own samples, twin critics, an entropy
+    temperature tuned toward ``--target-entropy`` (Haarnoja et al., 2018)."""
+    tqc = "tqc"
+    """TQC: SAC's actor over ``--critics`` critics of ``--quantiles`` quantiles each, the top
+    ``--dropped-quantiles`` of each critic dropped from the pooled target (Kuznetsov et al.,
+    2020)."""
+
+
+class Device(enum.Enum):
+    """Where the learners' networks, optimisers and batches live."""
+
+    cpu = "cpu"
+    """The CPU."""
+    cuda = "cuda"
+    """The first CUDA GPU; an error where there is none."""
+    auto = "auto"
+    """CUDA where torch finds a GPU, else the CPU."""
+
+
 class Preset(enum.Enum):
     """The defaults every setting starts from; options given beside it override them."""
 
@@ -71,8 +99,10 @@ class Preset(enum.Enum):
 
 @dataclasses.dataclass(frozen=True)
 class LearnerConfig:
-    """Settings of one DDPG learner (actor, critic, their targets and input normalisers)."""
+    """Settings of one learner (actor, critics, their targets and input normalisers)."""
 
+    learner: LearnerKind = LearnerKind.ddpg
+    """The learner: ddpg, td3, sac or tqc."""
     hidden_sizes: tuple[int, ...] = (256, 256, 256)
     """Widths of the hidden ReLU layers of actor and critic."""
     layer_norm: bool = False
@@ -106,6 +136,26 @@ class LearnerConfig:
     actor_after_critic: bool = True
     """Step the actor against the critic its own step just updated (off: both gradients from
     the same parameters, as OpenAI baselines' HER)."""
+    critics: int = 2
+    """td3, sac, tqc: critics learned side by side (ddpg has one)."""
+    actor_delay: int = 2
+    """td3: the actor (and its penalty) steps once every this many critic updates."""
+    target_noise: float = 0.2
+    """td3: std of the Gaussian noise on the target actor's unit action (target-policy
+    smoothing), as a fraction of the largest action."""
+    target_noise_clip: float = 0.5
+    """td3: that noise is clipped to [-this, this]."""
+    quantiles: int = 25
+    """tqc: quantiles of the return each critic learns."""
+    dropped_quantiles: int = 2
+    """tqc: the highest atoms dropped from the pooled target, per critic."""
+    # FetchReach, her + sac, seed 0: from 1.0 the entropy bonus (about 2.6 a step) outweighed
+    # the -1/0 reward and success stayed at 0-0.2 for 4 epochs; from 0.05, 0.7 after the first.
+    initial_temperature: float = 0.05
+    """sac, tqc: the entropy temperature at the start."""
+    target_entropy: float | None = None
+    """sac, tqc: the policy's entropy the temperature steers toward; None: minus the action's
+    dimension (the high level's: the goal's)."""
 
 
 LOW_LEVEL_BATCH: dict[Algo, int] = {Algo.her: 1024, Algo.ddpg: 1024, Algo.dtd: 256}
@@ -197,12 +247,15 @@ class TrainConfig:
     collect_ahead: bool = True
     """Collect a cycle's episodes while the previous cycle's updates run, with the policy from
     before them (off: after them, as OpenAI baselines' HER; slower with a collecting process)."""
+    device: Device = Device.cpu
+    """Where the learners' networks, optimisers and batches live (cpu, cuda, or auto: cuda where
+    there is a GPU); replay and acting stay on the CPU. A run's checkpoints load on either."""
     workers: int = 1
     """Data-parallel workers (torch.distributed): each collects its own episodes into its own
     replay; every update's gradients are averaged over all and the input statistics summed.
     An epoch is n_cycles cycles on every worker."""
     learner: tyro.conf.OmitArgPrefixes[LearnerConfig] = LOW_LEVEL_DEFAULTS
-    """Settings of the DDPG learner (of the low level, for dtd)."""
+    """Settings of the learner (of the low level, for dtd)."""
     segments: int = 2
     """dtd: segments an episode is cut into; one sub-goal each, the last one being the goal."""
     # With 0.1 FetchPush passed 0.9 success within 200k steps on three seeds of three (one of
@@ -245,7 +298,7 @@ class TrainConfig:
     where the goal is the sub-goal and the actor never chooses (off: only from the states
     where it chooses)."""
     high: LearnerConfig = HIGH_LEVEL_DEFAULTS
-    """dtd: settings of the high level's DDPG learner."""
+    """dtd: settings of the high level's learner."""
 
     def validate(self) -> None:
         """Raise :class:`ConfigError` naming the first setting that cannot work."""

@@ -115,6 +115,26 @@ def _learner_checks(learner: LearnerConfig, prefix: str, smallest_batch: int) ->
         (_positive(learner.norm_clip), f"{prefix}norm-clip must be > 0, got {learner.norm_clip}"),
         (_positive(learner.obs_clip), f"{prefix}obs-clip must be > 0, got {learner.obs_clip}"),
         (_positive(learner.norm_eps), f"{prefix}norm-eps must be > 0, got {learner.norm_eps}"),
+        (learner.critics >= 1, f"{prefix}critics must be at least 1, got {learner.critics}"),
+        (learner.actor_delay >= 1, f"{prefix}actor-delay must be at least 1, got {learner.actor_delay}"),
+        (
+            _finite_in(learner.target_noise, 0, math.inf)
+            and _finite_in(learner.target_noise_clip, 0, math.inf),
+            f"{prefix}target-noise and {prefix}target-noise-clip must be >= 0",
+        ),
+        (learner.quantiles >= 1, f"{prefix}quantiles must be at least 1, got {learner.quantiles}"),
+        (
+            0 <= learner.dropped_quantiles < learner.quantiles,
+            f"{prefix}dropped-quantiles must lie in [0, --quantiles), got {learner.dropped_quantiles}",
+        ),
+        (
+            _positive(learner.initial_temperature),
+            f"{prefix}initial-temperature must be > 0, got {learner.initial_temperature}",
+        ),
+        (
+            learner.target_entropy is None or math.isfinite(learner.target_entropy),
+            f"{prefix}target-entropy must be a finite number, got {learner.target_entropy}",
+        ),
     ]
 
 

@@ -1,8 +1,8 @@
 """A trained agent's deterministic acting paths as torch modules, each with the clipping and
 normalisation of its inputs and the scaling of its outputs inside: what the ONNX files hold.
 
-Each module calls the learner's own code (:meth:`DDPGLearner.action_of` and
-:meth:`DDPGLearner.value_of`), so an exported model computes what the agent computes; the
+Each module calls the learner's own code (:meth:`GoalLearner.action_of` and
+:meth:`GoalLearner.value_of`), so an exported model computes what the agent computes; the
 normalisers' statistics become constants of the model when it is traced.
 """
 
@@ -11,11 +11,11 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from dtd.agents.ddpg import DDPGLearner
+from dtd.agents.learner import GoalLearner
 
 
 class _LearnerPath(nn.Module):
-    def __init__(self, learner: DDPGLearner) -> None:
+    def __init__(self, learner: GoalLearner) -> None:
         super().__init__()
         # Registered so that the traced model holds their parameters (and head's buffers).
         self.actor, self.critic, self.head = learner.actor, learner.critic, learner.head

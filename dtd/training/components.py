@@ -14,15 +14,23 @@ import torch
 
 from dtd.agents.buffer import EpisodeBuffer
 from dtd.agents.collective import ALONE, Collective
-from dtd.agents.ddpg import DDPGLearner
 from dtd.agents.dot_to_dot import DotToDotAgent, HandOverSchedule, SubgoalExploration
 from dtd.agents.exploration import ActionNoise
 from dtd.agents.flat import GoalConditionedAgent
 from dtd.agents.her import GoalStrategy, relabel_probability
 from dtd.agents.interface import Agent
+from dtd.agents.learners import make_learner
 from dtd.agents.networks import BoxActionHead, SubgoalHead
 from dtd.agents.segments import segment_bounds, segment_window_end
-from dtd.config import Algo, Collection, HighTarget, RelabelWindow, TrainConfig, with_algorithm_defaults
+from dtd.config import (
+    Algo,
+    Collection,
+    Device,
+    HighTarget,
+    RelabelWindow,
+    TrainConfig,
+    with_algorithm_defaults,
+)
 from dtd.envs.make import env_kwargs, make_envs
 from dtd.envs.spec import EnvSpec, goal_functions
 from dtd.errors import ConfigError
@@ -48,7 +56,8 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
     combine their updates with fellow workers through ``collective``."""
     config = with_algorithm_defaults(config)
     gamma = config.learner.gamma if config.learner.gamma is not None else spec.default_gamma()
-    low = DDPGLearner(
+    device = resolved_device(config.device)
+    low = make_learner(
         spec.obs_dim,
         spec.goal_dim,
         spec.action_dim,
@@ -57,11 +66,14 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
         gamma,
         spec.sparse_rewards,
         collective,
+        device,
     )
     buffer = EpisodeBuffer.for_transitions(
         config.buffer_size, spec.horizon, spec.obs_dim, spec.goal_dim, spec.action_dim
     )
-    noise = ActionNoise(config.noise_eps, config.random_eps, spec.action_max)
+    # A stochastic policy explores by its own samples; random actions still replace some.
+    noise_eps = 0.0 if low.stochastic else config.noise_eps
+    noise = ActionNoise(noise_eps, config.random_eps, spec.action_max)
     goals = goal_functions(env, spec)
     if config.algo is not Algo.dtd:
         strategy = GoalStrategy.future if config.algo is Algo.her else GoalStrategy.none
@@ -84,7 +96,7 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
             "its episodes on reaching the goal; use --high-target bootstrap"
         )
     head = SubgoalHead(config.subgoal_max_distance, spec.goal_low, spec.goal_high, spec.quaternion)
-    high = DDPGLearner(
+    high = make_learner(
         spec.obs_dim + spec.goal_dim,
         spec.goal_dim,
         spec.goal_dim,
@@ -93,6 +105,7 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
         high_gamma,
         spec.sparse_rewards,
         collective,
+        device,
     )
     schedule = HandOverSchedule(
         config.subgoal_eps_start,
@@ -171,6 +184,17 @@ def build(
     return Components(spec, agent, collector, evaluation, np.random.default_rng(rng_seq))
 
 
+def resolved_device(device: Device) -> torch.device:
+    """Where the learners live: ``auto`` made concrete (CUDA where torch finds a GPU, else the
+    CPU); ``cuda`` on a machine without one is a :class:`ConfigError`."""
+    available = torch.cuda.is_available()
+    if device is Device.auto:
+        return torch.device("cuda" if available else "cpu")
+    if device is Device.cuda and not available:
+        raise ConfigError("--device cuda: torch finds no CUDA GPU on this machine; use --device cpu or auto")
+    return torch.device(device.value)
+
+
 def resolved_collection(collection: Collection, threads: int) -> Collection:
     """``auto`` made concrete for a learner of ``threads`` torch threads: a collecting process
     where a core of this worker's share of the machine is left for it, else inline (a process
@@ -225,7 +249,9 @@ def _exploring_side(
     assert config.env is not None
     train, spec = seeded_envs(config, config.episodes_per_cycle, train_seq)
     if agent is None:
-        agent = build_agent(dataclasses.replace(config, buffer_size=spec.horizon), spec, train[0])
+        # It only acts, between the learner's updates: on the CPU, wherever the learner is.
+        acting_config = dataclasses.replace(config, buffer_size=spec.horizon, device=Device.cpu)
+        agent = build_agent(acting_config, spec, train[0])
     return train, agent, spec, np.random.default_rng(explore_seq)
 
 

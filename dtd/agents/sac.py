@@ -1,0 +1,176 @@
+"""Goal-conditioned SAC (Haarnoja et al., 2018) and TQC (Kuznetsov et al., 2020): a squashed
+Gaussian actor that explores by its own samples, an entropy temperature tuned toward a target
+entropy, and twin critics (SAC) or critics of quantiles whose highest atoms are dropped (TQC)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import torch
+from torch import nn
+
+from dtd.agents.learner import GoalLearner, StepTensors
+from dtd.agents.networks import CriticEnsemble, GaussianActor
+from dtd.agents.records import Batch
+
+
+class SACLearner(GoalLearner):
+    """SAC: ``config.critics`` critics (two in the paper) whose lowest value the actor climbs
+    and the target bootstraps from, less the temperature times the log density of the action
+    sampled at the next state."""
+
+    stochastic = True
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        config = self.config
+        self.target_entropy = (
+            config.target_entropy if config.target_entropy is not None else -float(self.action_dim)
+        )
+        """The policy's entropy (per action) the temperature steers toward."""
+        self.log_temperature = torch.tensor(
+            math.log(config.initial_temperature), device=self.device, requires_grad=True
+        )
+        self.temperature_optim = torch.optim.Adam([self.log_temperature], lr=config.actor_lr)
+
+    def _uses_actor_target(self) -> bool:
+        return False
+
+    def _networks(self, input_dim: int, action_dim: int) -> tuple[nn.Module, nn.Module]:
+        config = self.config
+        actor = GaussianActor(input_dim, action_dim, config.hidden_sizes, config.layer_norm)
+        critic = CriticEnsemble(
+            input_dim, action_dim, config.hidden_sizes, config.critics, self._outputs(), config.layer_norm
+        )
+        return actor, critic
+
+    def _outputs(self) -> int:
+        """Values each critic gives of an action (1: its Q-value)."""
+        return 1
+
+    def _value(self, critic: nn.Module, inputs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        return critic(inputs, self._features(action)).squeeze(-1).min(dim=1).values
+
+    def _next_atoms(self, critic: nn.Module, inputs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        """(N, K) what the target bootstraps from at the next state: SAC's lowest critic (K = 1)."""
+        return self._value(critic, inputs, action)[:, None]
+
+    def _critic_loss(self, values: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        """The critics' loss of ``values`` (N, critics, outputs) against ``target`` (N, K)."""
+        # Each critic's own mean squared error, summed: each learns at the rate of one alone.
+        return torch.square(values.squeeze(-1) - target).mean(dim=0).sum()
+
+    @property
+    def temperature(self) -> torch.Tensor:
+        """The entropy temperature alpha (no gradient)."""
+        return self.log_temperature.detach().exp()
+
+    def _sample(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        noise = torch.randn(inputs.shape[0], self.action_dim, device=self.device)
+        return self._train_nets["actor"].sample(inputs, noise)
+
+    @torch.no_grad()
+    def target(self, step: StepTensors) -> torch.Tensor:
+        """(N, K) r + discount * (atoms at the next state - alpha * log pi(a'|o', g)), clipped to
+        the return's range. A known next action replaces the sampled one (and has no entropy: no
+        policy chose it); a known next value replaces the atoms."""
+        unit, log_prob = self._sample(step.next_inputs)
+        next_action = self._given_next_action(step, self.head(unit, step.next_obs))
+        if step.next_action_given is not None:
+            log_prob = torch.where(step.next_action_given, torch.zeros_like(log_prob), log_prob)
+        atoms = self._next_atoms(self._train_nets["critic_target"], step.next_inputs, next_action)
+        atoms = atoms - self.temperature * log_prob[:, None]
+        if step.next_value is not None and step.next_value_given is not None:
+            atoms = torch.where(step.next_value_given[:, None], step.next_value[:, None], atoms)
+        target = step.reward[:, None] + step.discount[:, None] * atoms
+        return torch.clamp(target, *self.return_bounds)
+
+    def update(self, batch: Batch) -> dict[str, float]:
+        """One step of the critics, the actor and the temperature; returns diagnostics."""
+        step = self.step_tensors(batch)
+        target = self.target(step)
+        values = self._train_nets["critic"](step.inputs, self._features(step.action))
+        critic_loss = self._critic_loss(values, target)
+        if not self.config.actor_after_critic:
+            actor_metrics = self._actor_step(step)
+        self._step(self._critic_params, self.critic_optim, critic_loss)
+        if self.config.actor_after_critic:
+            actor_metrics = self._actor_step(step)
+        return {
+            "critic_loss": critic_loss.item(),
+            "q_mean": values.detach().mean().item(),
+            "target_mean": target.mean().item(),
+            **actor_metrics,
+        }
+
+    def _actor_step(self, step: StepTensors) -> dict[str, float]:
+        """One step of the actor up the critics' value plus the entropy bonus (less the action
+        penalty), then one of the temperature toward the target entropy."""
+        inputs, obs = step.inputs, step.obs
+        if step.actor_rows is not None:
+            if not bool(step.actor_rows.any()):
+                self._step(self._actor_params, self.actor_optim, None)
+                self._step([self.log_temperature], self.temperature_optim, None)
+                return {}
+            inputs, obs = inputs[step.actor_rows], obs[step.actor_rows]
+        unit, log_prob = self._sample(inputs)
+        value = self._value(self._train_nets["critic"], inputs, self.head(unit, obs))
+        actor_loss = torch.mean(self.temperature * log_prob - value)
+        actor_loss = actor_loss + self.config.action_l2 * torch.mean(torch.square(unit))
+        self._step(self._actor_params, self.actor_optim, actor_loss)
+        # d/d(log alpha) of -log alpha * (log pi + target entropy): alpha falls while the policy's
+        # entropy is above the target, and rises when below.
+        entropy_gap = log_prob.detach() + self.target_entropy
+        temperature_loss = -torch.mean(self.log_temperature * entropy_gap)
+        self._step([self.log_temperature], self.temperature_optim, temperature_loss)
+        return {
+            "actor_loss": actor_loss.item(),
+            "entropy": -log_prob.detach().mean().item(),
+            "temperature": self.temperature.item(),
+        }
+
+    def _training_state(self) -> dict[str, Any]:
+        return {
+            "log_temperature": self.log_temperature.detach().clone(),
+            "temperature_optim": self.temperature_optim.state_dict(),
+        }
+
+    def _load_training_state(self, state: dict[str, Any]) -> None:
+        with torch.no_grad():
+            self.log_temperature.copy_(state["log_temperature"])
+        self.temperature_optim.load_state_dict(state["temperature_optim"])
+
+
+class TQCLearner(SACLearner):
+    """TQC: SAC's actor and temperature over ``config.critics`` critics of ``config.quantiles``
+    quantiles each. The target pools every critic's atoms at the next state, drops the highest
+    ``config.dropped_quantiles`` per critic (the overestimation), and each critic's quantiles
+    learn them by the quantile Huber loss; the actor climbs the mean of all atoms."""
+
+    def _outputs(self) -> int:
+        return self.config.quantiles
+
+    def _value(self, critic: nn.Module, inputs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        return critic(inputs, self._features(action)).mean(dim=(1, 2))
+
+    def _next_atoms(self, critic: nn.Module, inputs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        atoms = critic(inputs, self._features(action)).flatten(1)
+        kept = atoms.shape[1] - self.config.dropped_quantiles * self.config.critics
+        return torch.sort(atoms, dim=1).values[:, :kept]
+
+    def _critic_loss(self, values: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        return quantile_huber_loss(values, target)
+
+
+def quantile_huber_loss(quantiles: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """The quantile Huber loss (kappa 1) of ``quantiles`` (N, critics, M), quantile i at the
+    level (i + 1/2) / M, against the target atoms (N, K), averaged over every pair."""
+    levels = (torch.arange(quantiles.shape[-1], device=quantiles.device, dtype=quantiles.dtype) + 0.5) / (
+        quantiles.shape[-1]
+    )
+    delta = target[:, None, None, :] - quantiles[..., None]
+    size = delta.abs()
+    huber = torch.where(size <= 1.0, 0.5 * delta.square(), size - 0.5)
+    weight = torch.abs(levels[:, None] - (delta.detach() < 0).to(delta.dtype))
+    return torch.mean(weight * huber)
