@@ -138,8 +138,11 @@ def sweep(
     ray: Annotated[str | None, optional("ADDRESS", "local processes")] = None,
     progress: bool = True,
     final_episodes: int = 0,
+    grid: Annotated[tuple[str, ...], tyro.conf.UseAppendAction, optional("NAME=V1,V2", "none")] = (),
 ) -> None:
-    """Train every (algorithm, seed) pair of one configuration, each into OUT/<env>-<algo>-s<seed>.
+    """Train every (algorithm, seed) pair of one configuration, each into OUT/<env>-<algo>-s<seed>;
+    with --grid, every combination of the grid's settings too, each into
+    OUT/<env>-<algo>-<name>=<value>...-s<seed>.
 
     Run again on the same --out, finished trials are left alone and interrupted ones resume
     from their checkpoints. A failing trial is reported and does not stop the others. With
@@ -153,6 +156,7 @@ def sweep(
       dtd sweep --env FetchPush-v4 --preset paper --seeds 3 --out runs/push-sweep-paper
       dtd sweep --env FetchPush-v4 --seeds 5 --out /shared/push-sweep --ray auto
       dtd sweep --env FetchPush-v4 --seed 100 --seeds 5 --final-episodes 100 --out runs/record/push
+      dtd sweep --env FetchPush-v4 --algos dtd --grid learner=ddpg,tqc --grid updates_per_cycle=40,100 --out g
       dtd plot runs/push-sweep
 
     Args:
@@ -166,6 +170,11 @@ def sweep(
         final_episodes: Once a trial is trained, evaluate its last checkpoint over this many
             episodes and save it (RUN/eval-latest.json, the final dtd plot --stats takes);
             0: none. Run again, a saved evaluation of the last epoch is kept.
+        grid: A setting and its values to train each trial with, NAME=V1,V2 (a value read as
+            JSON, else as text; a list's commas inside its brackets); given again for another
+            setting, trials cover every combination. NAME as the option without dashes
+            (learner, updates_per_cycle, high.learner, hidden_sizes). dtd plot labels the
+            trials by the settings in which they differ.
     """
     from dtd.config import Algo
     from dtd.errors import ConfigError
@@ -178,7 +187,7 @@ def sweep(
         chosen = [Algo(name.strip()) for name in algos.split(",") if name.strip()]
     except ValueError as exc:
         raise ConfigError(f"--algos: {exc}; choose from {', '.join(a.value for a in Algo)}") from exc
-    trials = sweep_trials(config, chosen, seeds, out, final_episodes)
+    trials = sweep_trials(config, chosen, seeds, out, final_episodes, grid)
     ensure_writable(out, "the sweep's runs")
     outcomes = run_sweep(trials, workers=workers, ray_address=ray, show_progress=progress)
     failed = [outcome for outcome in outcomes if not outcome.ok]

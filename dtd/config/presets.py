@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Sequence
 from typing import Any
 
-from dtd.config.settings import LOW_LEVEL_BATCH, LOW_LEVEL_N_STEP, Preset, TrainConfig
+from dtd.config.settings import LOW_LEVEL_BATCH, LOW_LEVEL_N_STEP, LearnerConfig, Preset, TrainConfig
 from dtd.errors import ConfigError
 
 
@@ -83,15 +84,27 @@ def preset_config(preset: Preset, **settings: Any) -> TrainConfig:
     return dataclasses.replace(config, **settings)
 
 
-def with_settings(config: TrainConfig, settings: list[str]) -> TrainConfig:
-    """``config`` with ``NAME=VALUE`` settings applied: NAME is a field of TrainConfig (a
-    learner's as ``learner.<name>`` or ``high.<name>``), VALUE is JSON, or else a string."""
+LEARNER_FIELDS = frozenset(field.name for field in dataclasses.fields(LearnerConfig))
+
+
+def setting_path(name: str) -> str:
+    """A setting's dotted path in the configuration's data: the low level's learner settings,
+    named as their options are (``batch_size``, ``learner``), under ``learner.``."""
+    if "." not in name and name in LEARNER_FIELDS:
+        return f"learner.{name}"
+    return name
+
+
+def with_settings(config: TrainConfig, settings: Sequence[str]) -> TrainConfig:
+    """``config`` with ``NAME=VALUE`` settings applied: NAME is a field of TrainConfig, a
+    learner's as ``learner.<name>`` or ``high.<name>`` (the low level's also by its option's
+    name alone, e.g. ``batch_size``, ``learner`` for its kind), VALUE is JSON, or else a string."""
     data = config.to_dict()
     for setting in settings:
         name, equals, value = setting.partition("=")
         if not equals or not name:
             raise ConfigError(f"a setting is NAME=VALUE, got {setting!r}")
-        *parents, leaf = name.replace("-", "_").split(".")
+        *parents, leaf = setting_path(name.replace("-", "_")).split(".")
         target = data
         for parent in parents:
             if not isinstance(target.get(parent), dict):

@@ -84,7 +84,8 @@ def _draw_label(axes: Sequence[Any], against: Sequence[str], label: str, curves:
     named beside it ("epoch" or "env_steps"); return whether part of it is past the shortest
     run (drawn faint, as it is over fewer seeds)."""
     stats = band(curves)
-    style = {"color": colour_of(label), "linestyle": "--" if "(" in label else "-"}
+    # A preset's line is dashed; a label's settings may hold brackets of their own.
+    style = {"color": colour_of(label), "linestyle": "--" if " (" in label.split("=")[0] else "-"}
     complete = stats.runs == len(curves)
     name = f"{label} ({len(curves)} seed{'s' if len(curves) != 1 else ''})"
     for axis, field in zip(axes, against, strict=True):

@@ -9,7 +9,7 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from dtd.config import Collection, Preset, TrainConfig
+from dtd.config import Collection, Preset, TrainConfig, flat_items
 from dtd.errors import ConfigError, RunDirError
 from dtd.experiments.curves import Curve, read_curve
 from dtd.training.run_dir import RunDir, read_config
@@ -26,7 +26,9 @@ class RunCurve:
     run_dir: Path
     env: str
     label: str
-    """The algorithm, with `` (preset)`` where the preset is not the tuned default."""
+    """The algorithm, with `` (preset)`` where the preset is not the tuned default, and the
+    settings (``name=value``) in which the run differs from others of its task, algorithm and
+    preset found with it (a sweep's grid)."""
     curve: Curve
     test_episodes: int = 10
     """Evaluation episodes behind each epoch's eval success."""
@@ -79,6 +81,7 @@ def find_runs(directories: Sequence[Path]) -> list[RunCurve]:
             raise RunDirError(f"{directory} is not a directory")
         run_dirs.update(path.resolve().parent for path in directory.rglob("config.json"))
     trials: dict[TrainConfig, RunCurve] = {}
+    configs: dict[Path, TrainConfig] = {}
     for run_dir in sorted(run_dirs):
         try:
             config = read_config(RunDir(run_dir))
@@ -88,10 +91,7 @@ def find_runs(directories: Sequence[Path]) -> list[RunCurve]:
             continue
         if len(curve) == 0:
             continue
-        label = config.algo.value
-        if config.preset is not Preset.tuned:
-            label += f" ({config.preset.value})"
-        run = RunCurve(run_dir, config.env or "?", label, curve, config.test_episodes)
+        run = RunCurve(run_dir, config.env or "?", config.algo.value, curve, config.test_episodes)
         trial = dataclasses.replace(config, epochs=0, collector=Collection.auto)
         if trial in trials:
             kept, dropped = sorted([trials[trial], run], key=lambda r: len(r.curve), reverse=True)
@@ -102,7 +102,46 @@ def find_runs(directories: Sequence[Path]) -> list[RunCurve]:
             )
             run = kept
         trials[trial] = run
-    return sorted(trials.values(), key=lambda run: run.run_dir)
+        configs[run.run_dir] = config
+    runs = sorted(trials.values(), key=lambda run: run.run_dir)
+    labels = setting_labels([configs[run.run_dir] for run in runs])
+    return [dataclasses.replace(run, label=label) for run, label in zip(runs, labels, strict=True)]
+
+
+LABEL_IGNORES = frozenset(
+    {"seed", "epochs", "collector", "threads", "workers", "device", "explore_snapshots", "test_episodes"}
+)
+"""Settings that never name a group of runs: the seed, the budget, and matters of speed or of
+what a run keeps for later."""
+
+
+def setting_labels(configs: Sequence[TrainConfig]) -> list[str]:
+    """Each configuration's label: its algorithm, `` (preset)`` where not the tuned default, then
+    the settings in which it differs from the others of its task, algorithm and preset, as
+    ``name=value`` in option names (``learner=tqc high.learner=tqc``)."""
+    flats = [
+        {name: value for name, value in flat_items(config).items() if name not in LABEL_IGNORES}
+        for config in configs
+    ]
+    kin: dict[tuple[str, str, str], list[int]] = {}
+    for index, config in enumerate(configs):
+        kin.setdefault((config.env or "?", config.algo.value, config.preset.value), []).append(index)
+    labels = []
+    for index, config in enumerate(configs):
+        label = config.algo.value
+        if config.preset is not Preset.tuned:
+            label += f" ({config.preset.value})"
+        group = kin[(config.env or "?", config.algo.value, config.preset.value)]
+        mine = flats[index]
+        differing = [name for name, value in mine.items() if any(flats[i].get(name) != value for i in group)]
+        labels.append(" ".join([label, *(f"{name}={_compact(mine[name])}" for name in differing)]))
+    return labels
+
+
+def _compact(value: object) -> str:
+    if isinstance(value, list):
+        return "[" + ",".join(map(str, value)) + "]"
+    return str(value)
 
 
 def grouped_runs(runs: Sequence[RunCurve]) -> dict[str, dict[str, list[RunCurve]]]:
@@ -134,7 +173,10 @@ _COLOURS = {"ddpg": "tab:green", "her": "tab:blue", "dtd": "tab:red"}
 
 
 def colour_of(label: str) -> str | None:
-    """The colour of an algorithm's label in every figure (None: matplotlib's next)."""
+    """The colour of an algorithm's label in every figure, its presets' included; None (the
+    figure's next colour) for a label that names settings, one of several of its algorithm."""
+    if "=" in label:
+        return None
     return _COLOURS.get(label.split(" ")[0])
 
 

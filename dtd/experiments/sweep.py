@@ -1,4 +1,5 @@
-"""A sweep: every (algorithm, seed) trial of one configuration, each in its own run directory.
+"""A sweep: every (algorithm, seed) trial of one configuration, or of each combination of a grid
+of settings, each in its own run directory.
 
 Locally the trials share this machine's cores through a pool of processes; with a Ray address
 they become tasks of a Ray cluster. Either way, a sweep run again on the same directory leaves
@@ -8,6 +9,8 @@ finished trials alone and resumes interrupted ones (:mod:`dtd.experiments.trials
 from __future__ import annotations
 
 import dataclasses
+import itertools
+import re
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -15,25 +18,76 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from dtd.config import Algo, TrainConfig
+from dtd.config import Algo, TrainConfig, with_settings
 from dtd.errors import ConfigError
 from dtd.experiments.trials import Trial, TrialOutcome, run_local, run_ray, sharing_cores, trials_root
 from dtd.training.components import usable_cores
 from dtd.training.lifecycle import epochs_recorded
 
 
-def trial_name(config: TrainConfig) -> str:
-    """<env>-<algo>-s<seed>, the run directory's name inside the sweep's directory."""
+def trial_name(config: TrainConfig, settings: Sequence[str] = ()) -> str:
+    """<env>-<algo>[-<name>=<value>...]-s<seed>, the run directory's name inside the sweep's
+    directory: the grid's ``settings`` of the trial, each value with what a path should not
+    hold replaced (``hidden_sizes=[512, 512]`` becomes ``hidden_sizes=512_512``)."""
     env = (config.env or "env").split(":")[-1]
-    return f"{env}-{config.algo.value}-s{config.seed}"
+    parts = [env, config.algo.value]
+    for setting in settings:
+        name, _, value = setting.partition("=")
+        parts.append(f"{name}={re.sub(r'[^A-Za-z0-9.+_]+', '_', value).strip('_')}")
+    return "-".join([*parts, f"s{config.seed}"])
+
+
+def grid_points(grid: Sequence[str]) -> list[list[str]]:
+    """Every combination of the grid's settings, each given as ``NAME=V1,V2,...`` (a value may
+    be a JSON list, its commas inside brackets); ``[[]]`` for no grid. NAME is a setting's name
+    as ``dtd sweep --set`` takes it: a field of the configuration, ``learner.<name>`` or
+    ``high.<name>`` for a learner's."""
+    axes: list[list[str]] = []
+    names: set[str] = set()
+    for entry in grid:
+        name, equals, values = entry.partition("=")
+        name = name.strip().lstrip("-").replace("-", "_")
+        if not equals or not name or not values.strip():
+            raise ConfigError(f"--grid takes NAME=VALUE,VALUE,..., got {entry!r}")
+        if name in names:
+            raise ConfigError(f"--grid names {name} twice")
+        names.add(name)
+        choices = _split_values(values)
+        if len(set(choices)) != len(choices):
+            raise ConfigError(f"--grid {name} repeats a value: {values}")
+        axes.append([f"{name}={choice}" for choice in choices])
+    return [list(point) for point in itertools.product(*axes)]
+
+
+def _split_values(values: str) -> list[str]:
+    """``values`` split at the commas outside brackets."""
+    parts, depth, current = [], 0, ""
+    for char in values:
+        depth += char in "[{"
+        depth -= char in "]}"
+        if char == "," and depth == 0:
+            parts.append(current.strip())
+            current = ""
+        else:
+            current += char
+    parts.append(current.strip())
+    if any(not part for part in parts):
+        raise ConfigError(f"--grid has an empty value in {values!r}")
+    return parts
 
 
 def sweep_trials(
-    base: TrainConfig, algos: Sequence[Algo], seeds: int, out: Path, final_episodes: int = 0
+    base: TrainConfig,
+    algos: Sequence[Algo],
+    seeds: int,
+    out: Path,
+    final_episodes: int = 0,
+    grid: Sequence[str] = (),
 ) -> list[Trial]:
-    """Trials of ``base`` for each algorithm and ``seeds`` seeds from ``base.seed``; ordered seed
-    by seed, so that the first results hold every algorithm. With ``final_episodes``, each
-    trial's last checkpoint is evaluated over that many episodes once it is trained."""
+    """Trials of ``base`` for each algorithm, each point of the ``grid`` (:func:`grid_points`)
+    and ``seeds`` seeds from ``base.seed``; ordered seed by seed, so that the first results hold
+    every algorithm and setting. With ``final_episodes``, each trial's last checkpoint is
+    evaluated over that many episodes once it is trained."""
     if not algos:
         raise ConfigError("--algos names no algorithm")
     if len(set(algos)) != len(algos):
@@ -42,13 +96,19 @@ def sweep_trials(
         raise ConfigError(f"--seeds must be at least 1, got {seeds}")
     if final_episodes < 0:
         raise ConfigError(f"--final-episodes must be 0 (none) or more, got {final_episodes}")
+    points = grid_points(grid)
+    for point in points:
+        for setting in point:
+            if setting.partition("=")[0] in ("algo", "seed"):
+                raise ConfigError("--grid cannot set algo or seed: give --algos and --seeds")
     root = trials_root(out)
     trials = []
     for seed in range(base.seed, base.seed + seeds):
-        for algo in algos:
-            config = dataclasses.replace(base, algo=algo, seed=seed)
-            config.validate()
-            trials.append(Trial(config, root / trial_name(config), final_episodes))
+        for point in points:
+            for algo in algos:
+                config = with_settings(dataclasses.replace(base, algo=algo, seed=seed), point)
+                config.validate()
+                trials.append(Trial(config, root / trial_name(config, point), final_episodes))
     return trials
 
 

@@ -7,7 +7,7 @@ import re
 import numpy as np
 import pytest
 
-from dtd.config import Algo, Preset, TrainConfig
+from dtd.config import Algo, Preset, TrainConfig, with_settings
 from dtd.errors import ConfigError, RunDirError
 from dtd.experiments.curves import Curve, band, quantile
 from dtd.experiments.plots import plot
@@ -194,3 +194,21 @@ def test_an_unreadable_trial_is_left_out_with_a_warning_naming_it(sweep_dir, dam
     with open(result.summary_csv, newline="") as file:
         rows = {row["algo"]: row for row in csv.DictReader(file)}
     assert rows["her"]["runs"] == "2" and rows["dtd"]["runs"] == "1"  # the others are all drawn
+
+
+def test_a_grids_trials_are_grouped_and_labelled_by_the_settings_in_which_they_differ(tmp_path):
+    for seed in (0, 1):
+        for kind in ("ddpg", "tqc"):
+            run = RunDir(tmp_path / f"FetchPush-v4-dtd-learner={kind}-s{seed}")
+            run.root.mkdir(parents=True)
+            config = with_settings(
+                TrainConfig(env="FetchPush-v4", algo=Algo.dtd, seed=seed), [f"learner={kind}"]
+            )
+            write_config(run, config, {})
+            run.metrics.write_text("epoch,env_steps,wall_s,eval_success,train_success\n1,1000,10.0,0.5,0.0\n")
+    write_run(tmp_path, "her", 0, [0.1])
+    rows = {row.label: row.runs for row in summaries(find_runs([tmp_path]))}
+    # Settings that differ among the dtd runs name them; the seed never does; her stands alone.
+    assert rows == {"dtd learner=ddpg": 2, "dtd learner=tqc": 2, "her": 1}
+    plot([tmp_path], tmp_path / "figures")
+    assert (tmp_path / "figures" / "FetchPush-v4.png").is_file()

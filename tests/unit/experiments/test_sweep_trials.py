@@ -6,7 +6,7 @@ import sys
 import pytest
 from rich.console import Console
 
-from dtd.config import Algo, Collection, TrainConfig
+from dtd.config import Algo, Collection, LearnerKind, TrainConfig
 from dtd.errors import ConfigError, DtdError
 from dtd.experiments.sweep import SweepProgress, sweep_trials, workers_for
 from dtd.experiments.trials import Trial, import_ray, sharing_cores
@@ -30,6 +30,35 @@ def test_bad_sweeps_are_refused(tmp_path, algos, seeds, message):
         sweep_trials(TrainConfig(env="FetchPush-v4"), algos, seeds, tmp_path)
     with pytest.raises(ConfigError, match="--env"):
         sweep_trials(TrainConfig(), [Algo.her], 1, tmp_path)
+
+
+def test_a_grid_trains_every_combination_of_its_settings_each_in_a_directory_named_by_them(tmp_path):
+    grid = ["learner=ddpg,tqc", "hidden_sizes=[64, 64],[32]", "high.learner=sac"]
+    trials = sweep_trials(TrainConfig(env="FetchPush-v4"), [Algo.dtd], 2, tmp_path, grid=grid)
+    assert len(trials) == 2 * 2 * 2
+    assert trials[0].name == "FetchPush-v4-dtd-learner=ddpg-hidden_sizes=64_64-high.learner=sac-s0"
+    assert trials[3].name == "FetchPush-v4-dtd-learner=tqc-hidden_sizes=32-high.learner=sac-s0"
+    settings = {(t.config.learner.learner, t.config.learner.hidden_sizes, t.config.seed) for t in trials}
+    assert len(settings) == 8 and (LearnerKind.tqc, (64, 64), 1) in settings
+    assert all(t.config.high.learner is LearnerKind.sac for t in trials)
+    assert len({t.run_dir for t in trials}) == 8
+
+
+@pytest.mark.parametrize(
+    ("grid", "message"),
+    [
+        (["learner"], "NAME=VALUE"),
+        (["learner=ddpg,,tqc"], "empty value"),
+        (["learner=ddpg", "learner=tqc"], "twice"),
+        (["learner=tqc,tqc"], "repeats"),
+        (["seed=1,2"], "--seeds"),
+        (["no_such=1,2"], "unknown setting"),
+        (["learner=ddpg,qlearning"], "learner"),
+    ],
+)
+def test_bad_grids_are_refused_in_one_line(tmp_path, grid, message):
+    with pytest.raises(ConfigError, match=message):
+        sweep_trials(TrainConfig(env="FetchPush-v4"), [Algo.her], 1, tmp_path, grid=grid)
 
 
 def test_trials_running_together_share_the_cores():
