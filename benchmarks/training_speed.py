@@ -69,9 +69,8 @@ def main() -> None:
     print(f"# {args.env}, {args.cycles} cycles of {base.episodes_per_cycle} episodes + "
           f"{base.updates_per_cycle} updates, {os.cpu_count()} cores, "
           f"{platform.machine()}, torch {torch.__version__}")  # fmt: skip
-    print(
-        f"{'algo':<6} {'learner':<8} {'collector':<10} {'threads':>7} {'s / 1k steps':>13} {'env steps/s':>12}"
-    )
+    header = f"{'algo':<6} {'learner':<8} {'collector':<10} {'threads':>7}"
+    print(f"{header} {'s / 1k steps':>13} {'env steps/s':>12}")
     results: dict[tuple[str, str, str], float] = {}
     collections = [Collection(name) for name in args.collectors.split(",")]
     for algo in args.algos.split(","):
