@@ -165,12 +165,31 @@ class TQCLearner(SACLearner):
 
 def quantile_huber_loss(quantiles: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """The quantile Huber loss (kappa 1) of ``quantiles`` (N, critics, M), quantile i at the
-    level (i + 1/2) / M, against the target atoms (N, K), averaged over every pair."""
-    levels = (torch.arange(quantiles.shape[-1], device=quantiles.device, dtype=quantiles.dtype) + 0.5) / (
-        quantiles.shape[-1]
-    )
-    delta = target[:, None, None, :] - quantiles[..., None]
-    size = delta.abs()
-    huber = torch.where(size <= 1.0, 0.5 * delta.square(), size - 0.5)
-    weight = torch.abs(levels[:, None] - (delta.detach() < 0).to(delta.dtype))
-    return torch.mean(weight * huber)
+    level (i + 1/2) / M, against the target atoms (N, K, no gradient), averaged over every pair."""
+    return _QuantileHuber.apply(quantiles, target)
+
+
+class _QuantileHuber(torch.autograd.Function):
+    """The loss and its gradient in one pass over the (N, critics, M, K) pairs: with autograd
+    tracking each elementwise step, the loss took 15 ms of a 3x256 TQC update at batch 256,
+    computed this way 2.6 ms (benchmarks/updates.py)."""
+
+    @staticmethod
+    def forward(ctx: Any, quantiles: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        count = quantiles.shape[-1]
+        levels = (torch.arange(count, device=quantiles.device, dtype=quantiles.dtype) + 0.5) / count
+        delta = target[:, None, None, :] - quantiles[..., None]
+        # The weight |tau - [delta < 0]|, and Huber(delta) = c (delta - c / 2), c = clip(delta, -1, 1).
+        weight = torch.where(delta < 0, 1.0 - levels[:, None], levels[:, None])
+        clipped = delta.clamp(-1.0, 1.0)
+        weighted = weight * clipped
+        ctx.save_for_backward(weighted.sum(dim=-1))
+        ctx.pairs = delta.numel()
+        return torch.mean(weighted * (delta - 0.5 * clipped))
+
+    @staticmethod
+    def backward(ctx: Any, grad: torch.Tensor) -> tuple[torch.Tensor, None]:
+        # d loss / d quantile = -mean of weight * clip(delta) over its targets (pairs counted
+        # over the whole mean).
+        (weighted_sum,) = ctx.saved_tensors
+        return -grad * weighted_sum / ctx.pairs, None
