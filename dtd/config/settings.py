@@ -247,9 +247,10 @@ class TrainConfig:
     collect_ahead: bool = True
     """Collect a cycle's episodes while the previous cycle's updates run, with the policy from
     before them (off: after them, as OpenAI baselines' HER; slower with a collecting process)."""
-    device: Device = Device.cpu
-    """Where the learners' networks, optimisers and batches live (cpu, cuda, or auto: cuda where
-    there is a GPU); replay and acting stay on the CPU. A run's checkpoints load on either."""
+    device: Device = Device.auto
+    """Where the learners' networks, optimisers and batches live: cpu, cuda, or auto, cuda where
+    torch finds a GPU; replay and the collecting process's acting stay on the CPU. A run's
+    checkpoints load on either (--resume RUN --device cpu moves a GPU run to the CPU)."""
     workers: int = 1
     """Data-parallel workers (torch.distributed): each collects its own episodes into its own
     replay; every update's gradients are averaged over all and the input statistics summed.

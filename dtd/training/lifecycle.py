@@ -24,7 +24,7 @@ from dtd.training.trainer import Trainer, TrainState, restore
 from dtd.training.workers import SOLO, WorkerGroup, join_group, leave_group
 
 # Settings that may change when a run is resumed; any other must stay as the run began.
-RESUMABLE_SETTINGS = frozenset({"epochs", "threads", "collector", "explore_snapshots"})
+RESUMABLE_SETTINGS = frozenset({"epochs", "threads", "collector", "explore_snapshots", "device"})
 _RESUMABLE_FLAGS = ", ".join("--" + name for name in sorted(RESUMABLE_SETTINGS))
 
 
@@ -57,7 +57,8 @@ def resumed_config(stored: TrainConfig, given: TrainConfig) -> TrainConfig:
                 f"(the run has {stored_flat[name]!r}); only {_RESUMABLE_FLAGS} can"
             )
         changes[name] = value
-    return dataclasses.replace(stored, **changes)
+    # Typed as config.json is read (the flat values are plain: an enum's is its text).
+    return TrainConfig.from_dict({**stored.to_dict(), **changes})
 
 
 def train(

@@ -12,7 +12,7 @@ import gymnasium as gym
 
 from dtd.agents.dot_to_dot import DotToDotAgent
 from dtd.agents.interface import Agent
-from dtd.config import Algo, Collection, TrainConfig
+from dtd.config import Algo, Collection, Device, TrainConfig
 from dtd.errors import ConfigError
 from dtd.training.atomic import write_text_atomic
 from dtd.training.checkpoint import check_checkpoint, load_checkpoint, restoring
@@ -45,7 +45,9 @@ def load_run(
     config = read_config(run)
     path = run.checkpoint(checkpoint)
     snapshot = load_checkpoint(path)
-    components = build(config, eval_seed=seed, eval_envs=envs, collection=Collection.inline)
+    # Looking at a trained agent needs no GPU, wherever it was trained.
+    acting = dataclasses.replace(config, device=Device.cpu)
+    components = build(acting, eval_seed=seed, eval_envs=envs, collection=Collection.inline)
     try:
         check_checkpoint(snapshot, config, components.spec, path)
         with restoring(path):

@@ -23,7 +23,7 @@ import numpy as np
 
 from dtd.agents.dot_to_dot import DotToDotAgent
 from dtd.agents.segments import episode_plan
-from dtd.config import Algo, Collection
+from dtd.config import Algo, Collection, Device
 from dtd.errors import CheckpointError, ConfigError, DtdError, EnvError
 from dtd.explain.heatmap import (
     PlacedStart,
@@ -76,7 +76,9 @@ class Explorer:
         self.run = RunDir(Path(run_dir))
         self.config = read_config(self.run)
         self.videos = Path(videos)
-        self.components = build(self.config, eval_seed=seed, eval_envs=1, collection=Collection.inline)
+        # Looking at a trained agent needs no GPU, wherever it was trained.
+        acting = dataclasses.replace(self.config, device=Device.cpu)
+        self.components = build(acting, eval_seed=seed, eval_envs=1, collection=Collection.inline)
         self.components.collector.close()
         self.env = self.components.eval_envs[0]
         self.agent = self.components.agent
