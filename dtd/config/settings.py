@@ -198,6 +198,9 @@ class TrainConfig:
     max_episode_steps), each KEY=VALUE with VALUE read as JSON or Python (false, False, 3, 0.5,
     [1, 2]) or else as text, e.g. --env-kwargs continuing_task=False reward_type=sparse; kept in
     config.json for resume, eval, render, explore and export."""
+    time_feature: bool = False
+    """Append the fraction of the episode left, 1 - t/T, to the observation the networks see
+    (as RL Zoo's TimeFeatureWrapper for the Fetch tasks); needs a time limit."""
     algo: Algo = Algo.her
     """Agent to train."""
     preset: Preset = Preset.tuned

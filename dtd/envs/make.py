@@ -14,6 +14,7 @@ import gymnasium as gym
 
 from dtd.envs.joint_reads import read_joints_by_index
 from dtd.envs.spec import EnvSpec, env_spec
+from dtd.envs.time_feature import TimeFeature
 from dtd.errors import EnvError
 
 
@@ -80,12 +81,15 @@ def _shown(kwargs: Mapping[str, Any]) -> str:
 
 
 def make_envs(
-    env_id: str, count: int, kwargs: Mapping[str, Any] | None = None
+    env_id: str, count: int, kwargs: Mapping[str, Any] | None = None, time_feature: bool = False
 ) -> tuple[list[gym.Env], EnvSpec]:
-    """``count`` instances of one environment (its constructor given ``kwargs``) and its
+    """``count`` instances of one environment (its constructor given ``kwargs``; with
+    ``time_feature``, the fraction of the episode left appended to its observation) and its
     checked spec."""
     envs = [make_env(env_id, kwargs) for _ in range(count)]
     try:
+        if time_feature:
+            envs = [TimeFeature(env) for env in envs]
         return envs, env_spec(envs[0], env_id)
     except BaseException:
         for env in envs:

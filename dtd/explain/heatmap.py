@@ -19,6 +19,7 @@ import mujoco
 import numpy as np
 
 from dtd.agents.dot_to_dot import DotToDotAgent
+from dtd.envs.time_feature import as_observed
 from dtd.errors import ConfigError, EnvError
 from dtd.experiments.figures import pyplot
 
@@ -112,7 +113,7 @@ def put_block_and_goal(env: gym.Env, start: Sequence[float], goal: Sequence[floa
     goal_z = goal[2] if len(goal) > 2 else table.block_z
     unwrapped.goal = np.array([goal[0], goal[1], goal_z], dtype=np.float64)
     mujoco.mj_forward(unwrapped.model, unwrapped.data)
-    return unwrapped._get_obs()
+    return as_observed(env, unwrapped._get_obs())
 
 
 class PlacedStart(gym.Wrapper):

@@ -208,6 +208,7 @@ def describe(
             for model in models
         },
         "obs_dim": spec.obs_dim,
+        "time_feature": loaded.config.time_feature,
         "goal_dim": spec.goal_dim,
         "action_dim": spec.action_dim,
         "action_max": spec.action_max,
@@ -264,6 +265,9 @@ for t in range(policy["horizon"]):
     o, reward, terminated, truncated, info = env.step(action[0])
     if terminated or truncated: break  # the time limit, or the goal reached where that ends it"""
         sessions = 'actor = ort.InferenceSession(policy["models"]["policy"]["file"])'
+    if policy.get("time_feature"):  # the models' observation ends with the fraction of the episode left
+        observed = 'np.append(o["observation"], 1 - t / policy["horizon"])[None]'
+        acting = acting.replace('o["observation"][None]', observed)
     example = f"""import json, gymnasium as gym, gymnasium_robotics, numpy as np, onnxruntime as ort
 gym.register_envs(gymnasium_robotics)
 policy = json.load(open("policy.json"))
@@ -286,8 +290,9 @@ models' outputs differed from the torch agent's by at most
 {policy["largest_difference_from_torch"]:.1e}.
 
 {files}
-- `policy.json`: the task and its constructor's arguments (`env_kwargs`), dimensions, the goal
-  box, {when}the checkpoint, versions.
+- `policy.json`: the task and its constructor's arguments (`env_kwargs`), dimensions (with
+  `time_feature`, the observation the models take ends with 1 - t/T, the fraction of the
+  episode left), the goal box, {when}the checkpoint, versions.
 
 One episode with ONNX Runtime alone (run it in this folder; needs `gymnasium-robotics` and
 `onnxruntime`):

@@ -258,7 +258,7 @@ def _exploring_side(
 def make_task_envs(config: TrainConfig, count: int) -> tuple[list[gym.Env], EnvSpec]:
     """``count`` environments of ``config.env`` made with ``config.env_kwargs``, and the spec."""
     assert config.env is not None
-    return make_envs(config.env, count, env_kwargs(config.env_kwargs))
+    return make_envs(config.env, count, env_kwargs(config.env_kwargs), config.time_feature)
 
 
 def close_all(components: Components) -> None:

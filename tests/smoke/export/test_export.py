@@ -16,6 +16,7 @@ import pytest
 from dtd.agents.dot_to_dot import DotToDotAgent
 from dtd.agents.segments import high_level_input
 from dtd.envs.make import make_env
+from dtd.envs.time_feature import TimeFeature
 from dtd.training.components import close_all
 from dtd.training.rollout import run_many
 from tests.helpers import TINY, dtd
@@ -107,6 +108,8 @@ def torch_episode(run_dir: Path, seed: int) -> np.ndarray:
     agent, spec = loaded.components.agent, loaded.components.spec
     close_all(loaded.components)
     env = make_env(spec.env_id)
+    if loaded.config.time_feature:
+        env = TimeFeature(env)
     o, _ = env.reset(seed=seed)
     rng = np.random.default_rng(0)
     for t in range(spec.horizon):
@@ -117,6 +120,29 @@ def torch_episode(run_dir: Path, seed: int) -> np.ndarray:
         o, *_ = env.step(action[0])
     env.close()
     return o["achieved_goal"]
+
+
+def run_readme_example(folder: Path) -> list[float]:
+    """The final achieved goal of the README's example episode, run where dtd cannot be imported."""
+    code = re.search(r"```python\n(.*?)```", (folder / "README.md").read_text(), re.S).group(1)
+    assert len(code.strip().splitlines()) <= 19
+    blocked = "import sys\nsys.modules['dtd'] = None  # importing dtd would fail here\n"
+    result = subprocess.run(
+        [sys.executable, "-c", blocked + code], capture_output=True, text=True, timeout=300, cwd=folder
+    )
+    assert result.returncode == 0, result.stderr
+    return json.loads(result.stdout.strip().splitlines()[-1])["achieved_goal"]
+
+
+def test_a_run_with_the_time_feature_exports_it_and_the_example_appends_it(tmp_path):
+    run, out = tmp_path / "run", tmp_path / "onnx"
+    args = ["--env", "FetchReach-v4", "--algo", "dtd", "--time-feature", "--epochs", "1", *TINY]
+    assert dtd("train", *args, "--run-dir", run).returncode == 0
+    result = dtd("export", run, "--out", out)
+    assert result.returncode == 0, result.stderr
+    policy = json.loads((out / "policy.json").read_text())
+    assert policy["time_feature"] is True and policy["obs_dim"] == 11  # FetchReach's 10, and the time left
+    np.testing.assert_allclose(run_readme_example(out), torch_episode(run, seed=0), atol=1e-4)
 
 
 @pytest.mark.parametrize("name", ["dtd", "her"])
