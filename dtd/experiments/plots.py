@@ -20,7 +20,7 @@ import numpy as np
 from dtd.errors import RunDirError
 from dtd.experiments.curves import Curve, band
 from dtd.experiments.figures import pyplot, save_figure
-from dtd.experiments.run_curves import colour_of, cut_at, env_order, find_runs, grouped
+from dtd.experiments.run_curves import cut_at, env_order, find_runs, grouped, label_colours
 from dtd.experiments.statistics import (
     draw_statistics,
     group_statistics,
@@ -43,8 +43,9 @@ def draw(env: str, labels: dict[str, list[Curve]], path_stem: Path) -> list[Path
 
     figure, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True, layout="constrained")
     faint = False
+    colours = label_colours(list(labels))
     for label, curves in labels.items():
-        faint |= _draw_label(axes, ("epoch", "env_steps"), label, curves)
+        faint |= _draw_label(axes, ("epoch", "env_steps"), label, curves, colours[label])
     axes[0].set_xlabel("epoch")
     axes[0].xaxis.set_major_locator(ticker.MaxNLocator(integer=True))
     axes[1].set_xlabel("env steps")
@@ -66,9 +67,10 @@ def draw_tasks(groups: dict[str, dict[str, list[Curve]]], path_stem: Path) -> li
         1, len(groups), figsize=(4.6 * len(groups), 4.2), sharey=True, layout="constrained", squeeze=False
     )
     faint = False
+    colours = label_colours(list(dict.fromkeys(label for labels in groups.values() for label in labels)))
     for axis, (env, labels) in zip(axes[0], groups.items(), strict=True):
         for label, curves in labels.items():
-            faint |= _draw_label([axis], ("env_steps",), label, curves)
+            faint |= _draw_label([axis], ("env_steps",), label, curves, colours[label])
         axis.set_title(env.split(":")[-1])
         axis.set_xlabel("env steps")
         axis.xaxis.set_major_formatter(ticker.EngFormatter(sep=""))
@@ -79,18 +81,20 @@ def draw_tasks(groups: dict[str, dict[str, list[Curve]]], path_stem: Path) -> li
     return save_figure(figure, path_stem)
 
 
-def _draw_label(axes: Sequence[Any], against: Sequence[str], label: str, curves: list[Curve]) -> bool:
+def _draw_label(
+    axes: Sequence[Any], against: Sequence[str], label: str, curves: list[Curve], colour: str
+) -> bool:
     """Draw ``label``'s mean over seeds and band on each axis, against the :class:`Band` field
     named beside it ("epoch" or "env_steps"); return whether part of it is past the shortest
     run (drawn faint, as it is over fewer seeds)."""
     stats = band(curves)
     # A preset's line is dashed; a label's settings may hold brackets of their own.
-    style = {"color": colour_of(label), "linestyle": "--" if " (" in label.split("=")[0] else "-"}
+    style = {"color": colour, "linestyle": "--" if " (" in label.split("=")[0] else "-"}
     complete = stats.runs == len(curves)
     name = f"{label} ({len(curves)} seed{'s' if len(curves) != 1 else ''})"
     for axis, field in zip(axes, against, strict=True):
         x = getattr(stats, field)
-        colour = axis.plot(x[complete], stats.mean[complete], label=name, **style)[0].get_color()
+        axis.plot(x[complete], stats.mean[complete], label=name, **style)
         if not complete.all():
             start = max(np.flatnonzero(~complete)[0] - 1, 0)
             axis.plot(x[start:], stats.mean[start:], color=colour, ls=style["linestyle"], alpha=0.35)

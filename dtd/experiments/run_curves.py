@@ -183,6 +183,19 @@ def colour_of(label: str) -> str | None:
 _PAPER_TASKS = ("FetchPush", "FetchPickAndPlace", "HandManipulateBlock")
 
 
+_OTHER_COLOURS = ("tab:purple", "tab:orange", "tab:brown", "tab:pink", "tab:olive", "tab:cyan", "tab:gray")
+
+
+def label_colours(labels: Sequence[str]) -> dict[str, str]:
+    """A colour per label, the same in every panel of a figure: an algorithm's own where the label
+    is the algorithm's alone (or a preset's), else the next of a fixed list."""
+    colours: dict[str, str] = {}
+    others = iter(_OTHER_COLOURS * (len(labels) // len(_OTHER_COLOURS) + 1))
+    for label in labels:
+        colours[label] = colour_of(label) or next(others)
+    return colours
+
+
 def env_order(env: str) -> tuple[int, str]:
     """The paper's tasks in its order (FetchPush, FetchPickAndPlace, HandManipulateBlock, each
     in any version or variant), then any other environment by name."""

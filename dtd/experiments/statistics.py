@@ -26,9 +26,9 @@ from dtd.experiments.figures import pyplot, save_figure
 from dtd.experiments.run_curves import (
     FinalSuccess,
     RunCurve,
-    colour_of,
     env_order,
     final_success,
+    label_colours,
     label_order,
 )
 from dtd.experiments.summary import span_text, steps_text
@@ -242,10 +242,11 @@ def draw_statistics(env: str, groups: Sequence[GroupStatistics], path_stem: Path
     plt = pyplot()
 
     figure, axes = plt.subplots(1, 4, figsize=(16, 3.8), layout="constrained")
+    colours = label_colours([group.label for group in groups])
     for axis, name in zip(axes[:3], ("median", "iqm", "mean"), strict=True):
         for row, group in enumerate(groups):
             interval = getattr(group, name)
-            colour = colour_of(group.label)
+            colour = colours[group.label]
             axis.barh(
                 row, interval.high - interval.low, left=interval.low, height=0.6, color=colour, alpha=0.5
             )
@@ -258,13 +259,14 @@ def draw_statistics(env: str, groups: Sequence[GroupStatistics], path_stem: Path
     profiles = performance_profiles(groups)
     for group in groups:
         profile, band = profiles[group.label]
-        colour = colour_of(group.label)
+        colour = colours[group.label]
         axes[3].plot(THRESHOLDS, profile, color=colour, label=group.label)
         axes[3].fill_between(THRESHOLDS, band[0], band[1], color=colour, alpha=0.2, linewidth=0)
     axes[3].set_xlabel("final success threshold")
     axes[3].set_ylabel("share of runs above it")
     axes[3].set_title("performance profile")
-    axes[3].legend(loc="lower left")
+    # Below the panel: a grid's labels are longer than the panel is wide.
+    axes[3].legend(loc="upper center", bbox_to_anchor=(0.5, -0.22), fontsize="small")
     axes[3].grid(alpha=0.3)
     figure.suptitle(f"{env}: final success over seeds, {CONFIDENCE:.0%} stratified-bootstrap CIs (rliable)")
     return save_figure(figure, path_stem)
