@@ -1,5 +1,5 @@
 """The learners from the command line: every algorithm trains on each, resumes the same, is
-evaluated and exported; --device cuda is refused in one line where there is no GPU, and a run
+evaluated and exported to ONNX; --device cuda is refused in one line where there is no GPU, and a run
 made for a GPU is looked at (and resumed with --device cpu) on a machine without one."""
 
 from __future__ import annotations
@@ -35,6 +35,10 @@ def test_a_learner_trains_resumes_like_a_longer_run_and_is_evaluated(tmp_path, a
     evaluated = dtd("eval", longer, "--episodes", "2")
     assert evaluated.returncode == 0, evaluated.stderr
     assert 0.0 <= json.loads(evaluated.stdout)["success_rate"] <= 1.0
+    # The ONNX files compute what the agent does (a Gaussian actor's mean, an ensemble's value).
+    exported = dtd("export", longer, "--out", tmp_path / "onnx")
+    assert exported.returncode == 0, exported.stderr
+    assert "largest difference from the torch agent" in exported.stdout
 
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has a CUDA GPU")
