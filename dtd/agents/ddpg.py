@@ -80,12 +80,12 @@ class DDPGLearner(GoalLearner):
     ) -> torch.Tensor:
         """One step of the actor up the critic's value, less its action penalty, on ``rows``
         of the batch (all without them); the loss (no step, and loss 0, without any row)."""
-        if rows is not None:
-            chosen = torch.as_tensor(rows, device=self.device)
-            if not bool(chosen.any()):
-                self._step(self._actor_params, self.actor_optim, None)
-                return torch.zeros(())
-            inputs, obs = inputs[chosen], obs[chosen]
+        chosen = None if rows is None else torch.as_tensor(rows, device=self.device)
+        learning = self._actor_rows(inputs, obs, chosen)
+        if learning is None:
+            self._step(self._actor_params, self.actor_optim, None)
+            return torch.zeros(())
+        inputs, obs = learning
         policy_action, unit = self._policy(nets["actor"], inputs, obs)
         action_penalty = torch.mean(torch.square(unit))
         actor_loss = (

@@ -207,6 +207,18 @@ class GoalLearner:
             actor_rows=optional(batch.actor_rows, torch.bool),
         )
 
+    @staticmethod
+    def _actor_rows(
+        inputs: torch.Tensor, obs: torch.Tensor, rows: torch.Tensor | None
+    ) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """``inputs`` and ``obs`` of the rows the actor learns from (all, without ``rows``); None
+        where the batch holds none of them."""
+        if rows is None:
+            return inputs, obs
+        if not bool(rows.any()):
+            return None
+        return inputs[rows], obs[rows]
+
     def _given_next_action(self, step: StepTensors, next_action: torch.Tensor) -> torch.Tensor:
         """The target's next action, the known one where the batch gives it."""
         if step.next_action is None or step.next_action_given is None:

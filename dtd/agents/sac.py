@@ -107,13 +107,12 @@ class SACLearner(GoalLearner):
     def _actor_step(self, step: StepTensors) -> dict[str, float]:
         """One step of the actor up the critics' value plus the entropy bonus (less the action
         penalty), then one of the temperature toward the target entropy."""
-        inputs, obs = step.inputs, step.obs
-        if step.actor_rows is not None:
-            if not bool(step.actor_rows.any()):
-                self._step(self._actor_params, self.actor_optim, None)
-                self._step([self.log_temperature], self.temperature_optim, None)
-                return {}
-            inputs, obs = inputs[step.actor_rows], obs[step.actor_rows]
+        learning = self._actor_rows(step.inputs, step.obs, step.actor_rows)
+        if learning is None:
+            self._step(self._actor_params, self.actor_optim, None)
+            self._step([self.log_temperature], self.temperature_optim, None)
+            return {}
+        inputs, obs = learning
         unit, log_prob = self._sample(inputs)
         value = self._value(self._train_nets["critic"], inputs, self.head(unit, obs))
         actor_loss = torch.mean(self.temperature * log_prob - value)

@@ -77,12 +77,11 @@ class TD3Learner(GoalLearner):
         return metrics
 
     def _actor_step(self, step: StepTensors) -> float:
-        inputs, obs = step.inputs, step.obs
-        if step.actor_rows is not None:
-            if not bool(step.actor_rows.any()):
-                self._step(self._actor_params, self.actor_optim, None)
-                return 0.0
-            inputs, obs = inputs[step.actor_rows], obs[step.actor_rows]
+        learning = self._actor_rows(step.inputs, step.obs, step.actor_rows)
+        if learning is None:
+            self._step(self._actor_params, self.actor_optim, None)
+            return 0.0
+        inputs, obs = learning
         action, unit = self._policy(self._train_nets["actor"], inputs, obs)
         loss = -self._value(self._train_nets["critic"], inputs, action).mean()
         loss = loss + self.config.action_l2 * torch.mean(torch.square(unit))
