@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import signal
 import sys
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Annotated
 
@@ -180,7 +182,7 @@ def sweep(
     from dtd.errors import ConfigError
     from dtd.experiments.run_curves import find_runs
     from dtd.experiments.summary import summaries, summary_table
-    from dtd.experiments.sweep import run_sweep, sweep_trials
+    from dtd.experiments.sweep import run_sweep, sweep_trials, workers_for
     from dtd.training.atomic import ensure_writable
 
     try:
@@ -188,8 +190,10 @@ def sweep(
     except ValueError as exc:
         raise ConfigError(f"--algos: {exc}; choose from {', '.join(a.value for a in Algo)}") from exc
     trials = sweep_trials(config, chosen, seeds, out, final_episodes, grid)
+    workers_for(trials, workers)  # refused before anything is written
     ensure_writable(out, "the sweep's runs")
-    outcomes = run_sweep(trials, workers=workers, ray_address=ray, show_progress=progress)
+    with _terminated_as_interrupted():
+        outcomes = run_sweep(trials, workers=workers, ray_address=ray, show_progress=progress)
     failed = [outcome for outcome in outcomes if not outcome.ok]
     for outcome in failed:
         print(f"{outcome.trial.name} failed:\n{outcome.error}", file=sys.stderr)
@@ -199,6 +203,20 @@ def sweep(
     print(f"{len(outcomes) - len(failed)} of {len(outcomes)} trials finished in {out}")
     if failed:
         sys.exit(1)
+
+
+@contextlib.contextmanager
+def _terminated_as_interrupted() -> Iterator[None]:
+    """SIGTERM (a scheduler's stop) handled as Ctrl-C while the block runs."""
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def plot(

@@ -3,7 +3,8 @@
 A trial is a configuration (its ``epochs`` the budget) and a run directory. Run again on the
 same directories, finished trials are left alone and interrupted ones resume from their last
 checkpoint (:func:`dtd.training.lifecycle.train_to_end`). A failing trial is reported with its traceback
-and does not stop the others.
+and does not stop the others. Interrupted (Ctrl-C, SIGTERM), a runner stops its running trials
+at once (each keeps its last finished epoch) and starts no other.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import contextlib
 import dataclasses
 import multiprocessing
 import os
+import signal
 import threading
 import time
 import traceback
@@ -52,11 +54,16 @@ class TrialOutcome:
     error: str | None
     wall_s: float
     """Seconds this call spent on the trial (close to 0 for one finished before)."""
+    interrupted: bool = False
+    """Stopped by an interrupt before its end (or never started): it resumes when run again."""
 
     @property
     def ok(self) -> bool:
-        return self.error is None
+        return self.error is None and not self.interrupted
 
+
+RAY_STOP_S = 30.0
+"""Seconds an interrupted sweep waits for its running Ray tasks to stop."""
 
 OnDone = Callable[[TrialOutcome], None]
 OnWait = Callable[[], None]
@@ -78,7 +85,9 @@ def sharing_cores(config: TrainConfig, workers: int, cores: int) -> TrainConfig:
 
 
 def run_trial(trial: Trial) -> TrialOutcome:
-    """Train ``trial`` to its last epoch (resuming, or leaving a finished run); never raises."""
+    """Train ``trial`` to its last epoch (resuming, or leaving a finished run); never raises.
+    Interrupted, the trial stops where it is (its last finished epoch is kept) and the outcome
+    says so."""
     from dtd.training.lifecycle import train_to_end
     from dtd.training.trained_run import final_evaluation
 
@@ -90,6 +99,8 @@ def run_trial(trial: Trial) -> TrialOutcome:
             train_to_end(trial.config, trial.run_dir)
             if trial.final_episodes:
                 final_evaluation(trial.run_dir, trial.final_episodes)
+    except KeyboardInterrupt:
+        return TrialOutcome(trial, None, time.perf_counter() - start, interrupted=True)
     except Exception:
         return TrialOutcome(trial, traceback.format_exc(), time.perf_counter() - start)
     return TrialOutcome(trial, None, time.perf_counter() - start)
@@ -105,38 +116,93 @@ def run_local(
 
     ``on_done`` is called in this process as each trial ends, ``on_wait`` every
     :data:`POLL_S` seconds meanwhile. Even one worker is a process of its own, so that a trial
-    that crashes its interpreter is reported like any other failure.
+    that crashes its interpreter is reported like any other failure. Interrupted (a
+    KeyboardInterrupt here, or SIGINT to the whole process group as a terminal sends it), the
+    running trials stop, the queued ones never start, and the KeyboardInterrupt is raised again
+    once the workers are done.
     """
     if workers < 1:
         raise ValueError(f"workers must be at least 1, got {workers}")
     outcomes: dict[int, TrialOutcome] = {}
     context = multiprocessing.get_context("spawn")
     with concurrent.futures.ProcessPoolExecutor(
-        max_workers=workers, mp_context=context, initializer=_exit_with_parent, initargs=(os.getpid(),)
+        max_workers=workers, mp_context=context, initializer=_start_worker, initargs=(os.getpid(),)
     ) as pool:
-        futures = {pool.submit(run_trial, trial): index for index, trial in enumerate(trials)}
+        futures = {pool.submit(_run_in_worker, trial): index for index, trial in enumerate(trials)}
         pending = set(futures)
-        while pending:
-            done, pending = concurrent.futures.wait(
-                pending, timeout=POLL_S, return_when=concurrent.futures.FIRST_COMPLETED
-            )
-            for future in done:
-                index = futures[future]
-                try:
-                    outcomes[index] = future.result()
-                except Exception:  # the worker process itself died
-                    outcomes[index] = TrialOutcome(trials[index], traceback.format_exc(), 0.0)
-                if on_done is not None:
-                    on_done(outcomes[index])
-            if on_wait is not None:
-                on_wait()
+        try:
+            _collect(futures, pending, trials, outcomes, on_done, on_wait)
+        except KeyboardInterrupt:
+            for future in pending:
+                future.cancel()
+            # Trials already handed to a worker's queue cannot be cancelled: the workers,
+            # interrupted, answer them at once without training.
+            for child in multiprocessing.active_children():
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(child.pid, signal.SIGINT)
+            raise
     return [outcomes[index] for index in range(len(trials))]
 
 
-def _exit_with_parent(parent: int) -> None:
-    """In a pool's worker: end this process as soon as ``parent`` is gone, so that a killed
-    sweep leaves no trial training on (a sweep run again would resume the same run directory
-    in a second process)."""
+def _collect(
+    futures: dict[concurrent.futures.Future, int],
+    pending: set[concurrent.futures.Future],
+    trials: Sequence[Trial],
+    outcomes: dict[int, TrialOutcome],
+    on_done: OnDone | None,
+    on_wait: OnWait | None,
+) -> None:
+    """Wait for the ``pending`` futures (taking them out as they end), each outcome into
+    ``outcomes``."""
+    while pending:
+        done, _ = concurrent.futures.wait(
+            pending, timeout=POLL_S, return_when=concurrent.futures.FIRST_COMPLETED
+        )
+        for future in done:
+            pending.discard(future)
+            index = futures[future]
+            try:
+                outcomes[index] = future.result()
+            except Exception:  # the worker process itself died
+                outcomes[index] = TrialOutcome(trials[index], traceback.format_exc(), 0.0)
+            if on_done is not None:
+                on_done(outcomes[index])
+        if on_wait is not None:
+            on_wait()
+
+
+_stopping = threading.Event()
+"""Set in a pool's worker once it was interrupted: it starts no further trial."""
+
+_training = threading.Event()
+"""Set in a pool's worker while it trains a trial."""
+
+
+def _run_in_worker(trial: Trial) -> TrialOutcome:
+    """:func:`run_trial` in a pool's worker, unless the worker was interrupted before."""
+    if _stopping.is_set():
+        return TrialOutcome(trial, None, 0.0, interrupted=True)
+    _training.set()
+    try:
+        return run_trial(trial)
+    finally:
+        _training.clear()
+
+
+def _start_worker(parent: int) -> None:
+    """In a pool's worker: the first interrupt stops the trial it trains (a KeyboardInterrupt,
+    as in ``dtd train``) and every later trial is answered without training; and the process
+    ends as soon as ``parent`` is gone, so that a killed sweep leaves no trial training on (a
+    sweep run again would resume the same run directory in a second process)."""
+
+    def interrupt(signum: int, frame: object) -> None:
+        first = not _stopping.is_set()
+        _stopping.set()
+        if first and _training.is_set():
+            raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, interrupt)
+    signal.signal(signal.SIGTERM, interrupt)
 
     def watch() -> None:
         while os.getppid() == parent:
@@ -164,7 +230,11 @@ def run_ray(
     ray = import_ray()
     started_here = not ray.is_initialized()
     if started_here:
+        # Ray installs a SIGTERM handler of its own; the caller's (a sweep's stop) is kept.
+        on_terminate = signal.getsignal(signal.SIGTERM)
         _init_ray(ray, address)
+        if signal.getsignal(signal.SIGTERM) != on_terminate and on_terminate is not None:
+            signal.signal(signal.SIGTERM, on_terminate)
     try:
         remote = ray.remote(run_trial)
         refs = {
@@ -173,18 +243,26 @@ def run_ray(
         }
         outcomes: dict[int, TrialOutcome] = {}
         pending = list(refs)
-        while pending:
-            done, pending = ray.wait(pending, num_returns=1, timeout=POLL_S)
-            for ref in done:
-                index = refs[ref]
-                try:
-                    outcomes[index] = ray.get(ref)
-                except Exception:  # the task or its worker died
-                    outcomes[index] = TrialOutcome(trials[index], traceback.format_exc(), 0.0)
-                if on_done is not None:
-                    on_done(outcomes[index])
-            if on_wait is not None:
-                on_wait()
+        try:
+            while pending:
+                done, pending = ray.wait(pending, num_returns=1, timeout=POLL_S)
+                for ref in done:
+                    index = refs[ref]
+                    try:
+                        outcomes[index] = ray.get(ref)
+                    except Exception:  # the task or its worker died
+                        outcomes[index] = TrialOutcome(trials[index], traceback.format_exc(), 0.0)
+                    if on_done is not None:
+                        on_done(outcomes[index])
+                if on_wait is not None:
+                    on_wait()
+        except KeyboardInterrupt:
+            # Queued tasks are dropped; running ones get a KeyboardInterrupt, keep their last
+            # finished epoch and are waited for (a little) so that none writes on after the sweep.
+            for ref in pending:
+                ray.cancel(ref)
+            ray.wait(pending, num_returns=len(pending), timeout=RAY_STOP_S)
+            raise
         return [outcomes[index] for index in range(len(trials))]
     finally:
         if started_here:

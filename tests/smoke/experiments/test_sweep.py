@@ -28,6 +28,18 @@ SWEEP = ["sweep", "--env", "FetchReach-v4", "--algos", "her,dtd", "--seeds", "2"
 SWEEP += TINY
 NAMES = ["FetchReach-v4-her-s0", "FetchReach-v4-dtd-s0", "FetchReach-v4-her-s1", "FetchReach-v4-dtd-s1"]
 """The order a one-worker sweep runs its trials in."""
+HER_SWEEP = [
+    "sweep",
+    "--env",
+    "FetchReach-v4",
+    "--algos",
+    "her",
+    "--seeds",
+    "3",
+    "--epochs",
+    str(EPOCHS),
+    *TINY,
+]
 
 
 def tiny_config(**settings) -> TrainConfig:
@@ -93,6 +105,70 @@ def test_an_interrupted_sweep_run_again_skips_finished_trials_and_resumes_the_ot
     again = dtd(*SWEEP, "--workers", "2", "--out", out)
     assert again.returncode == 0, again.stderr
     assert [read_metrics(out / name)[-1]["epoch"] for name in NAMES] == [str(EPOCHS)] * 4
+
+
+def start_sweep(out: Path, *extra: str) -> subprocess.Popen[str]:
+    """A sweep of her on three seeds in a session of its own (its own process group, as a
+    terminal's foreground job), caught once its first trial has finished an epoch."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "dtd", *HER_SWEEP, *extra, "--out", str(out)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        # A shell that started these tests in the background may have left SIGINT ignored.
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    deadline = time.monotonic() + 240  # a guard against a hang, not a measure of speed
+    while epochs_recorded(out / "FetchReach-v4-her-s0") < 1:
+        assert process.poll() is None, process.communicate()
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    return process
+
+
+def stopped(process: subprocess.Popen[str], workers: list[int]) -> str:
+    """``process``'s stderr once it and its ``workers`` have ended (guarded against a hang)."""
+    _, stderr = process.communicate(timeout=60)
+    deadline = time.monotonic() + 30
+    while any(Path(f"/proc/{pid}").exists() for pid in workers):
+        assert time.monotonic() < deadline, "a trial went on after its sweep ended"
+        time.sleep(0.1)
+    return stderr
+
+
+def test_ctrl_c_stops_the_running_trial_and_starts_no_queued_one(tmp_path):
+    out = tmp_path / "sweep"
+    process = start_sweep(out, "--workers", "1")
+    workers = children(process.pid)
+    os.killpg(process.pid, signal.SIGINT)  # Ctrl-C as a terminal sends it: to the whole group
+    stderr = stopped(process, workers)
+    assert process.returncode == 130, stderr
+    assert stderr.strip() == "dtd: interrupted; run the same dtd sweep again to continue"
+    interrupted_at = epochs_recorded(out / "FetchReach-v4-her-s0")
+    assert 1 <= interrupted_at < EPOCHS
+    assert [epochs_recorded(out / f"FetchReach-v4-her-s{seed}") for seed in (1, 2)] == [0, 0]
+    rows_before = read_metrics(out / "FetchReach-v4-her-s0")
+
+    result = dtd(*HER_SWEEP, "--workers", "2", "--out", out)
+    assert result.returncode == 0, result.stderr
+    assert [epochs_recorded(out / f"FetchReach-v4-her-s{seed}") for seed in range(3)] == [EPOCHS] * 3
+    assert read_metrics(out / "FetchReach-v4-her-s0")[:interrupted_at] == rows_before
+
+
+@pytest.mark.parametrize("runner", [["--workers", "2"], ["--ray", "local"]], ids=["processes", "ray"])
+def test_sigterm_to_the_sweep_alone_stops_its_trials_too(tmp_path, runner):
+    if "--ray" in runner:
+        pytest.importorskip("ray")
+    out = tmp_path / "sweep"
+    process = start_sweep(out, *runner)
+    workers = children(process.pid)
+    process.send_signal(signal.SIGTERM)
+    stderr = stopped(process, workers)
+    assert process.returncode == 130, stderr
+    assert "run the same dtd sweep again to continue" in stderr
+    assert epochs_recorded(out / "FetchReach-v4-her-s0") < EPOCHS
+    assert epochs_recorded(out / "FetchReach-v4-her-s2") == 0
 
 
 def test_a_failing_trial_is_reported_and_the_others_finish(tmp_path):
