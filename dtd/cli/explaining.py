@@ -204,15 +204,17 @@ def explore(
 
     if threads < 1:
         raise DtdError(f"--threads must be at least 1, got {threads}")
+    if not 0 <= port <= 65535:
+        raise DtdError(f"--port must lie in 0..65535 (0: any free one), got {port}")
     torch.set_num_threads(threads)
-    if not is_loopback(host):
-        print(
-            f"dtd explore: warning: listening on {host}: anyone who can reach it can use the page "
-            "(there is no login) and have episodes rendered on this machine",
-            file=sys.stderr,
-        )
 
     def ready(url: str) -> None:
+        if not is_loopback(host):
+            print(
+                f"dtd explore: warning: listening on {host}: anyone who can reach it can use the page "
+                "(there is no login) and have episodes rendered on this machine",
+                file=sys.stderr,
+            )
         print(f"dtd explore: {run_dir} at {url}  (Ctrl-C stops it)", flush=True)
 
     # The server stops on Ctrl-C and passes the interrupt on: here it is the way to stop.

@@ -56,7 +56,11 @@ HIGH_LEVEL_HINTS = {
 
 ENV_KWARGS_HINT = ("KEY=VALUE ...", "(default: none: the registered defaults)")
 REQUIRED_ENV = {"env": ("ID", "(required)"), "env_kwargs": ENV_KWARGS_HINT}
-REQUIRED_ENV_UNLESS_RESUMED = {"env": ("ID", "(required, unless --resume)"), "env_kwargs": ENV_KWARGS_HINT}
+REQUIRED_ENV_UNLESS_RESUMED = {
+    "env": ("ID", "(required, unless --resume)"),
+    "env_kwargs": ENV_KWARGS_HINT,
+    "workers": ("INT", "(default: 1; resumed: the run's own)"),
+}
 """Metavar and hint (shown where the default would be) of options whose default says nothing."""
 
 

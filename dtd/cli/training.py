@@ -82,12 +82,14 @@ def train(
 
 
 def _workers_of(config: TrainConfig, resume: Path | None) -> int:
-    """The workers of the run to start (--workers) or to resume (as it was started)."""
+    """The workers of the run to start (--workers, else 1) or to resume (as it was started; a
+    --workers that differs is refused)."""
     if resume is None:
-        return config.workers
+        return config.workers or 1
+    from dtd.training.lifecycle import resumed_config
     from dtd.training.run_dir import RunDir, read_config
 
-    return read_config(RunDir(resume)).workers
+    return resumed_config(read_config(RunDir(resume)), config).workers or 1
 
 
 def _launch_workers(

@@ -254,10 +254,11 @@ class TrainConfig:
     """Where the learners' networks, optimisers and batches live: cpu, cuda, or auto, cuda where
     torch finds a GPU; replay and the collecting process's acting stay on the CPU. A run's
     checkpoints load on either (--resume RUN --device cpu moves a GPU run to the CPU)."""
-    workers: int = 1
+    workers: int | None = None
     """Data-parallel workers (torch.distributed): each collects its own episodes into its own
     replay; every update's gradients are averaged over all and the input statistics summed.
-    An epoch is n_cycles cycles on every worker."""
+    An epoch is n_cycles cycles on every worker. Unset: 1 for a new run (under torchrun, its
+    job's size); a resumed run's own, which another number cannot change."""
     learner: tyro.conf.OmitArgPrefixes[LearnerConfig] = LOW_LEVEL_DEFAULTS
     """Settings of the learner (of the low level, for dtd)."""
     segments: int = 2

@@ -46,7 +46,10 @@ def validate(config: TrainConfig) -> None:
         ),
         (config.threads >= 0, f"--threads must be 0 (automatic) or more, got {config.threads}"),
         (config.seed >= 0, f"--seed must be 0 or more, got {config.seed}"),
-        (config.workers >= 1, f"--workers must be at least 1, got {config.workers}"),
+        (
+            config.workers is None or config.workers >= 1,
+            f"--workers must be at least 1, got {config.workers}",
+        ),
         (config.segments >= 2, f"--segments must be at least 2, got {config.segments}"),
         (
             _finite_in(config.subgoal_sigma, 0, math.inf),

@@ -22,6 +22,7 @@ from dtd.experiments.curves import Curve, band
 from dtd.experiments.figures import pyplot, save_figure
 from dtd.experiments.run_curves import cut_at, env_order, find_runs, grouped, label_colours
 from dtd.experiments.statistics import (
+    check_intervals_possible,
     draw_statistics,
     group_statistics,
     require_rliable,
@@ -140,6 +141,7 @@ def plot(
         )
     if stats:
         require_rliable()
+        check_intervals_possible(runs)
     ensure_writable(Path(out), "the figures")
     figures = []
     groups = grouped(runs)

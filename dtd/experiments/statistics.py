@@ -54,8 +54,20 @@ class Interval:
     low: float
     high: float
 
+    @property
+    def has_interval(self) -> bool:
+        """False for one run's value: one run has no spread to bootstrap."""
+        return not (np.isnan(self.low) or np.isnan(self.high))
+
     def text(self) -> str:
+        if not self.has_interval:
+            return f"{self.estimate:.2f} [one run: none]"
         return f"{self.estimate:.2f} [{self.low:.2f}, {self.high:.2f}]"
+
+    def cells(self) -> list[str]:
+        """Estimate, low, high for a CSV (the bounds empty where there is no interval)."""
+        bounds = [f"{self.low:.4f}", f"{self.high:.4f}"] if self.has_interval else ["", ""]
+        return [f"{self.estimate:.4f}", *bounds]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -84,12 +96,29 @@ def require_rliable() -> None:
         raise DtdError("--stats needs rliable, which is not installed: pip install 'dtd[stats]'") from exc
 
 
-def group_statistics(runs: Sequence[RunCurve]) -> list[GroupStatistics]:
-    """Statistics per (environment, algorithm) of the runs' final successes."""
-    require_rliable()
+def runs_per_group(runs: Sequence[RunCurve]) -> dict[tuple[str, str], list[RunCurve]]:
+    """The runs of each (environment, label)."""
     groups: dict[tuple[str, str], list[RunCurve]] = {}
     for run in runs:
         groups.setdefault((run.env, run.label), []).append(run)
+    return groups
+
+
+def check_intervals_possible(runs: Sequence[RunCurve]) -> None:
+    """A :class:`DtdError` where no (environment, algorithm) has two runs: no interval to give."""
+    groups = runs_per_group(runs)
+    if all(len(members) < 2 for members in groups.values()):
+        raise DtdError(
+            "--stats gives intervals over seeds, and each task and algorithm here has one run: "
+            "train more seeds (dtd sweep --seeds N) or leave out --stats"
+        )
+
+
+def group_statistics(runs: Sequence[RunCurve]) -> list[GroupStatistics]:
+    """Statistics per (environment, algorithm) of the runs' final successes; a group of one run
+    has its value without an interval, and no probability of improvement."""
+    require_rliable()
+    groups = runs_per_group(runs)
     finals = {key: [final_success(run) for run in members] for key, members in groups.items()}
     with warnings.catch_warnings():
         # arch (rliable's bootstrap) announces a change of its own default generator.
@@ -121,8 +150,11 @@ def _scores(finals: Sequence[FinalSuccess]) -> np.ndarray:
 
 
 def _aggregates(label: str, scores: np.ndarray) -> list[Interval]:
-    """Median, IQM and mean of ``scores`` with their intervals."""
+    """Median, IQM and mean of ``scores`` with their intervals (NaN bounds for one run)."""
     from rliable import library, metrics
+
+    if len(scores) < 2:
+        return [Interval(float(scores[0]), np.nan, np.nan)] * 3
 
     def estimates(matrix: np.ndarray) -> np.ndarray:
         # The median of the runs' finals: rliable's aggregate median is one over tasks of the
@@ -145,7 +177,7 @@ def _improvement(
     to beat; keyed by :data:`BASELINE`."""
     from rliable import library, metrics
 
-    if baseline is None or baseline_of(label) == label:
+    if baseline is None or baseline_of(label) == label or min(len(scores), len(baseline)) < 2:
         return {}
     pair = f"{label},{BASELINE}"
     points, intervals = library.get_interval_estimates(
@@ -185,9 +217,9 @@ def statistics_columns(
     for group in groups:
         row = [" ".join(f"{score:.3f}" for score in group.scores)]
         for interval in (group.median, group.iqm, group.mean):
-            row += [f"{interval.estimate:.4f}", f"{interval.low:.4f}", f"{interval.high:.4f}"]
+            row += interval.cells()
         poi = group.improvement.get(BASELINE)
-        row += [f"{poi.estimate:.4f}", f"{poi.low:.4f}", f"{poi.high:.4f}"] if poi else ["", "", ""]
+        row += poi.cells() if poi else ["", "", ""]
         cells[(group.env, group.label)] = row
     return header, cells
 
@@ -247,9 +279,10 @@ def draw_statistics(env: str, groups: Sequence[GroupStatistics], path_stem: Path
         for row, group in enumerate(groups):
             interval = getattr(group, name)
             colour = colours[group.label]
-            axis.barh(
-                row, interval.high - interval.low, left=interval.low, height=0.6, color=colour, alpha=0.5
-            )
+            if interval.has_interval:
+                axis.barh(
+                    row, interval.high - interval.low, left=interval.low, height=0.6, color=colour, alpha=0.5
+                )
             axis.plot([interval.estimate] * 2, [row - 0.3, row + 0.3], color=colour, linewidth=2)
         axis.set_yticks(range(len(groups)), [f"{g.label} ({len(g.scores)})" for g in groups])
         axis.set_xlim(-0.02, 1.02)

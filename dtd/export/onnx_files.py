@@ -144,7 +144,11 @@ def export_run(run_dir: Path, out: Path, checkpoint: str = "latest", force: bool
     ``README.md`` into ``out`` (refused when ``out`` holds files, unless ``force``)."""
     require_onnx()
     out = Path(out)
-    if out.exists() and (not out.is_dir() or any(out.iterdir())) and not force:
+    if out.exists() and not out.is_dir():
+        raise ConfigError(
+            f"--out {out} is a file; the export writes a directory of files: give another --out"
+        )
+    if out.exists() and any(out.iterdir()) and not force:
         raise ConfigError(f"{out} already exists; give --force to replace what is in it, or another --out")
     loaded = load_run(Path(run_dir), checkpoint)
     try:

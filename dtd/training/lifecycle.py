@@ -25,7 +25,7 @@ from dtd.training.workers import SOLO, WorkerGroup, join_group, leave_group
 
 # Settings that may change when a run is resumed; any other must stay as the run began.
 RESUMABLE_SETTINGS = frozenset({"epochs", "threads", "collector", "explore_snapshots", "device"})
-_RESUMABLE_FLAGS = ", ".join("--" + name for name in sorted(RESUMABLE_SETTINGS))
+_RESUMABLE_FLAGS = ", ".join("--" + name.replace("_", "-") for name in sorted(RESUMABLE_SETTINGS))
 
 
 def default_run_dir(config: TrainConfig) -> Path:
@@ -79,9 +79,9 @@ def train(
     """
     config, run = checked_start(config, run_dir, resume, force)
     world = launched_workers()
-    if world is not None and resume is None and config.workers == 1:
-        config = dataclasses.replace(config, workers=world)  # torchrun without --workers
-    workers = config.workers if resume is None else resumed_config(read_config(run), config).workers
+    if resume is None and config.workers is None:
+        config = dataclasses.replace(config, workers=world or 1)  # under torchrun: the job's size
+    workers = (config.workers if resume is None else resumed_config(read_config(run), config).workers) or 1
     if world is None and workers > 1:
         raise ConfigError(
             f"a run of {workers} workers is started by dtd train --workers {workers} or by torchrun"

@@ -14,7 +14,8 @@ import os
 from collections.abc import Iterator
 from pathlib import Path
 
-from dtd.errors import RunDirError
+from dtd.errors import MachineError, RunDirError
+from dtd.training.atomic import machine_failure
 
 LOCK_NAME = ".trainer.lock"
 
@@ -22,7 +23,8 @@ LOCK_NAME = ".trainer.lock"
 @contextlib.contextmanager
 def holding(root: Path) -> Iterator[None]:
     """Hold the run directory ``root`` (made if missing) for this process, or raise
-    :class:`RunDirError` naming the process that holds it, or why it cannot be written.
+    :class:`RunDirError` naming the process that holds it, or why it cannot be written (a
+    :class:`MachineError` where the disk is full).
 
     On leaving, the lock file is removed, and so are the folders made for it where the run
     wrote nothing (bad input found during set-up leaves the disk as it was).
@@ -36,8 +38,11 @@ def holding(root: Path) -> Iterator[None]:
         raise RunDirError(f"cannot write to the run directory {root}: {exc.strerror or exc}") from exc
     fd = _locked(path)
     try:
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        try:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        except OSError as exc:  # a full disk, before the run has written anything
+            raise MachineError(machine_failure(exc, path)) from exc
         yield
     finally:
         # Removed before it is unlocked: a trainer that opened it meanwhile sees it gone and

@@ -124,3 +124,10 @@ def test_checkpoint_that_does_not_fit_the_agent(tmp_path, reach_run):
     assert_refused(dtd("eval", run), "does not fit this run")
     assert_refused(dtd("train", "--resume", run, "--epochs", "5"), "does not fit this run")
     assert tree_digest(run) == before
+
+
+def test_a_sweep_refused_leaves_no_directory(tmp_path):
+    out = tmp_path / "sweep"
+    result = dtd("sweep", "--env", "FetchReach-v4", "--algos", "her", *TINY, "--workers", "-1", "--out", out)
+    assert_refused(result, "--workers must be 0 (one per core) or more, got -1")
+    assert not out.exists()

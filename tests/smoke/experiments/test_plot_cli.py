@@ -7,7 +7,7 @@ import shutil
 
 import pytest
 
-from tests.helpers import dtd
+from tests.helpers import TINY, dtd
 
 pytestmark = pytest.mark.smoke
 
@@ -43,6 +43,12 @@ def test_a_saved_evaluation_is_the_final_plot_stats_takes(tmp_path, reach_run):
     saved = json.loads((run / "eval-latest.json").read_text())
     assert saved["episodes"] == 4 and saved["epoch"] == 3
     assert saved == {k: v for k, v in json.loads(result.stdout.splitlines()[-1]).items() if k != "plans"}
+    # One run gives no interval: refused in one line, nothing written.
+    result = dtd("plot", tmp_path / "runs", "--stats", "--out", tmp_path / "figures")
+    assert result.returncode == 2 and "one run" in result.stderr, result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and not (tmp_path / "figures").exists()
+    another_seed = ["--env", "FetchReach-v4", "--epochs", "3", "--seed", "8", *TINY]
+    assert dtd("train", *another_seed, "--run-dir", tmp_path / "runs" / "reach-8").returncode == 0
     result = dtd("plot", tmp_path / "runs", "--stats", "--out", tmp_path / "figures")
     assert result.returncode == 0, result.stderr
     assert "4 episodes" in result.stdout and "IQM" in result.stdout

@@ -25,6 +25,7 @@ import numpy as np
 import pytest
 
 from dtd.config import Algo, Collection, Preset, preset_config
+from dtd.explain.explore.server import WAITING_MAPS
 from dtd.explain.heatmap import place_block_and_goal
 from dtd.training.checkpoint import load_checkpoint
 from dtd.training.components import build, close_all
@@ -168,11 +169,35 @@ def test_bad_requests_get_a_4xx_with_a_reason_and_the_server_stays_up(served):
             "off the table",
         ),
         (served + "api/episode", b'{"epoch": 99}', 404, "no snapshot of epoch 99"),
+        (served + "api/episode", b'{"epoch": true}', 422, "epoch"),
+        (served + "api/episode", b'{"epoch": "1"}', 422, "epoch"),
     ]
     for url, body, status, reason in cases:
         answered, answer = get(url, body)
         assert answered == status and reason in answer["error"], (url, body, answered, answer)
     assert get(served + "api/run")[0] == 200
+
+
+def test_a_page_elsewhere_cannot_use_the_explorer(served):
+    host, port = served.removeprefix("http://").rstrip("/").rsplit(":", 1)
+
+    def ask(method: str, path: str, headers: dict[str, str], body: bytes | None = None) -> tuple[int, bytes]:
+        connection = http.client.HTTPConnection(host, int(port), timeout=120)
+        connection.request(method, path, body=body, headers={"Content-Type": "application/json", **headers})
+        response = connection.getresponse()
+        return response.status, response.read()
+
+    # DNS rebinding: the attacker's name resolves to this machine, the Host header still says it.
+    status, body = ask("GET", "/api/run", {"Host": "attacker.example"})
+    assert status == 400 and b"push-dtd" not in body
+    episode = b'{"epoch": 1}'
+    rebound = {"Host": "attacker.example", "Origin": "http://attacker.example"}
+    assert ask("POST", "/api/episode", rebound, episode)[0] == 400
+    # A page elsewhere posting to the right address.
+    elsewhere = {"Host": f"{host}:{port}", "Origin": "http://attacker.example"}
+    assert ask("POST", "/api/episode", elsewhere, episode)[0] == 403
+    assert ask("GET", map_url("/", 1), {"Host": f"{host}:{port}", "Sec-Fetch-Site": "cross-site"})[0] == 403
+    assert ask("GET", "/api/run", {"Host": f"localhost:{port}"})[0] == 200
 
 
 @pytest.mark.parametrize(
@@ -205,13 +230,19 @@ def test_no_file_outside_the_page_and_its_videos_can_be_read(served, push_dtd_ru
     assert not any(secret in body for secret in secrets)
 
 
-def test_twenty_requests_at_once_are_each_answered_for_their_own_placement(served):
+def test_twenty_requests_at_once_are_each_answered_for_their_own_placement_or_refused(served):
     blocks = [(1.1 + 0.02 * i, 0.5 + 0.025 * i) for i in range(20)]
     urls = [map_url(served, 1 + i % 2, block=block) for i, block in enumerate(blocks)]
     with concurrent.futures.ThreadPoolExecutor(max_workers=20) as pool:
         together = list(pool.map(get, urls))
     one_by_one = [get(url) for url in urls]
+    # A few wait their turn; beyond those the server says at once that it is busy.
+    answered = [status for status, _ in together if status == 200]
+    assert len(answered) >= 1 + WAITING_MAPS
     for (status, answer), (_, alone), block, url in zip(together, one_by_one, blocks, urls, strict=True):
+        if status == 503:
+            assert "busy" in answer["error"]
+            continue
         assert status == 200, answer
         np.testing.assert_allclose(answer["block"][:2], block, atol=1e-9)
         assert answer["epoch"] == int(url.split("epoch=")[1].split("&")[0])
@@ -260,6 +291,14 @@ def test_the_command_refuses_what_cannot_work_in_one_line(push_dtd_run, tmp_path
         capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert result.returncode == 2 and "config.json is missing" in result.stderr
+    for options, message in [
+        (["--port", "70000"], "--port must lie in 0..65535"),
+        (["--port", "-1"], "--port must lie in 0..65535"),
+        (["--host", "999.1.1.1"], "not an address or a known name"),
+    ]:
+        result = dtd("explore", push_dtd_run, *options)
+        lines = result.stderr.strip().splitlines()
+        assert result.returncode == 2 and len(lines) == 1 and message in lines[0], result.stderr
 
 
 def test_a_hand_run_has_no_map_and_says_why(tmp_path):

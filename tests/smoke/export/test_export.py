@@ -155,15 +155,20 @@ def test_bad_input_is_one_line(push_dtd_run, tmp_path, exported):
     config_only = tmp_path / "untrained"
     config_only.mkdir()
     (config_only / "config.json").write_text((push_dtd_run / "config.json").read_text())
+    a_file = tmp_path / "a-file"
+    a_file.write_text("kept")
     cases = [
         (["export", config_only, "--out", tmp_path / "a"], "no checkpoint"),
         (["export", push_dtd_run, "--checkpoint", "newest", "--out", tmp_path / "b"], "no checkpoint named"),
         (["export", push_dtd_run, "--out", exported["dtd"]], "already exists"),
+        (["export", push_dtd_run, "--out", a_file], "is a file"),
+        (["export", push_dtd_run, "--out", a_file, "--force"], "is a file"),
     ]
     for args, message in cases:
         result = dtd(*args)
         assert result.returncode == 2 and message in result.stderr, result.stderr
         assert len(result.stderr.strip().splitlines()) == 1
+    assert a_file.read_text() == "kept"
     missing = subprocess.run(
         [sys.executable, "-c", "import sys; sys.modules['onnxruntime'] = None\nfrom dtd.cli import main\n"
          f"main(['export', {str(push_dtd_run)!r}, '--out', {str(tmp_path / 'c')!r}])"],

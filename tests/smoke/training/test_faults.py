@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from dtd.cli import main
-from dtd.training import atomic
+from dtd.training import atomic, run_lock
 from dtd.training.checkpoint import load_checkpoint
 from dtd.training.run_lock import LOCK_NAME
 from tests.helpers import TINY, dtd, read_metrics, read_only
@@ -133,6 +133,20 @@ def test_a_full_disk_is_one_line_and_the_last_checkpoint_stays(tmp_path, monkeyp
     main(["train", "--resume", str(run), "--epochs", "2", "--no-progress"])
     assert [int(row["epoch"]) for row in read_metrics(run)] == [1, 2]
     assert load_checkpoint(run / "checkpoints" / "latest.pt")["state"]["epoch"] == 2
+
+
+def test_a_disk_full_before_the_run_starts_is_one_line_and_leaves_nothing(tmp_path, monkeypatch, capsys):
+    def full(fd, data, offset):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(run_lock.os, "pwrite", full)
+    run = tmp_path / "run"
+    with pytest.raises(SystemExit) as exited:
+        main(["train", "--env", "FetchReach-v4", "--epochs", "1", *TINY, "--run-dir", str(run)])
+    assert exited.value.code == 1
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines == [f"dtd: error: no space left on device writing {run / LOCK_NAME}"]
+    assert not run.exists()
 
 
 def test_a_run_directory_that_cannot_be_written_is_refused_before_set_up(tmp_path):

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from dtd.config import Preset
+from dtd.errors import DtdError
 from dtd.experiments.plots import plot
 from dtd.experiments.run_curves import find_runs
 from dtd.experiments.statistics import group_statistics
@@ -88,3 +89,23 @@ def test_finals_at_different_budgets_are_said_to_be(record, tmp_path):
     assert budgets in result.table
     (her,) = [group for group in group_statistics(find_runs([record])) if group.label == "her"]
     assert her.env_steps == [2000.0] * 5 + [4000.0]
+
+
+def test_a_group_of_one_run_has_its_value_and_no_interval(record, tmp_path):
+    write_run(record / "paper", "dtd", 100, [0.0, 0.7], preset=Preset.paper)
+    result = plot([record], tmp_path / "out", stats=True)
+    (alone,) = [group for group in group_statistics(find_runs([record])) if group.label == "dtd (paper)"]
+    assert alone.median.estimate == pytest.approx(0.7) and not alone.median.has_interval
+    assert alone.improvement == {}
+    assert "0.70 [one run: none]" in result.table and "0.70 [0.70, 0.70]" not in result.table
+    rows = {row["algo"]: row for row in csv.DictReader(result.summary_csv.read_text().splitlines())}
+    alone_row = rows["dtd (paper)"]
+    assert alone_row["final_median"] == "0.7000" and alone_row["final_median_ci_low"] == ""
+
+
+def test_stats_over_runs_of_one_seed_each_are_refused_before_anything_is_written(tmp_path):
+    write_run(tmp_path / "runs", "her", 100, [0.0, 0.5])
+    write_run(tmp_path / "runs", "dtd", 100, [0.0, 0.7])
+    with pytest.raises(DtdError, match="one run"):
+        plot([tmp_path / "runs"], tmp_path / "out", stats=True)
+    assert not (tmp_path / "out").exists()
