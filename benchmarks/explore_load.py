@@ -2,7 +2,8 @@
 after a few seconds, while a plain ``GET /api/run`` is timed again and again.
 
 Prints how the episode requests were answered (by status), how many episodes were played (those
-beyond the answered ones were played for clients that had gone) and the median and p95 of ``/api/run`` meanwhile.
+beyond the answered ones were played for clients that had gone) and the median and p95 of
+``/api/run`` meanwhile.
 
     python benchmarks/explore_load.py RUN_DIR [--episodes 30] [--give-up-s 5]
 """
