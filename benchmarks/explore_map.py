@@ -107,8 +107,8 @@ def main() -> None:
             busy = sum("error" in answer for _, answer in together)
             print(
                 f"  20 at once: all answered in {(time.perf_counter() - began) * 1000:.0f} ms, "
-                f"{busy} of them 503 busy (the server draws one map at a time and lets a few wait; slowest round trip "
-                f"{max(t for t, _ in together):.0f} ms)"
+                f"{busy} of them 503 busy (the server draws one map at a time and lets a few wait; "
+                f"slowest round trip {max(t for t, _ in together):.0f} ms)"
             )
     finally:
         server.terminate()
