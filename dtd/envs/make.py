@@ -7,7 +7,8 @@ import contextlib
 import difflib
 import io
 import json
-from collections.abc import Mapping, Sequence
+import threading
+from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -17,10 +18,21 @@ from dtd.envs.spec import EnvSpec, env_spec
 from dtd.envs.time_feature import TimeFeature
 from dtd.errors import EnvError
 
+_QUIET = threading.RLock()
+"""Held while stderr is sent nowhere: the redirect swaps the process's one ``sys.stderr``, and two
+threads making environments at once would otherwise restore each other's stand-in for good."""
+
+
+@contextlib.contextmanager
+def _quiet() -> Iterator[None]:
+    """stderr sent nowhere while the block runs (one thread at a time)."""
+    with _QUIET, contextlib.redirect_stderr(io.StringIO()):
+        yield
+
 
 def register_robotics_envs() -> None:
     """Register the Gymnasium-Robotics environments (quietly: the package prints a notice)."""
-    with contextlib.redirect_stderr(io.StringIO()):
+    with _quiet():
         import gymnasium_robotics
 
     gym.register_envs(gymnasium_robotics)
@@ -53,7 +65,7 @@ def make_env(env_id: str, kwargs: Mapping[str, Any] | None = None) -> gym.Env:
     register_robotics_envs()
     kwargs = dict(kwargs or {})
     try:
-        with contextlib.redirect_stderr(io.StringIO()):
+        with _quiet():
             env = gym.make(env_id, disable_env_checker=True, **kwargs)
     except TypeError as exc:
         if not kwargs:
