@@ -10,6 +10,7 @@ from typing import Annotated
 import tyro
 
 from dtd.cli.options import optional
+from dtd.config import EVAL_SEED
 from dtd.errors import DtdError
 
 RunDirArgument = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN_DIR")]
@@ -20,7 +21,7 @@ def evaluate(
     run_dir: RunDirArgument,
     episodes: int = 100,
     checkpoint: str = "latest",
-    seed: int = 1_000_003,
+    seed: int = EVAL_SEED,
     show_subgoals: bool = False,
     save: bool = False,
 ) -> None:
@@ -53,7 +54,7 @@ def render(
     episodes: int = 3,
     out: Annotated[Path | None, optional("DIR", "RUN_DIR/render")] = None,
     checkpoint: str = "latest",
-    seed: int = 1_000_003,
+    seed: int = EVAL_SEED,
     width: int = 480,
     height: int = 480,
 ) -> None:
@@ -145,7 +146,7 @@ def report(
     run_dir: RunDirArgument,
     episodes: int = 3,
     checkpoint: str = "latest",
-    seed: int = 1_000_003,
+    seed: int = EVAL_SEED,
     resolution: int = 60,
 ) -> None:
     """Write RUN_DIR/report.html: configuration, training curves, heatmaps (dtd), key-frame

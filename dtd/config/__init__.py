@@ -14,6 +14,7 @@ from dtd.config.presets import (
     with_settings,
 )
 from dtd.config.settings import (
+    EVAL_SEED,
     HIGH_LEVEL_DEFAULTS,
     LOW_LEVEL_BATCH,
     LOW_LEVEL_DEFAULTS,
@@ -30,6 +31,7 @@ from dtd.config.settings import (
 )
 
 __all__ = [
+    "EVAL_SEED",
     "HIGH_LEVEL_DEFAULTS",
     "LOW_LEVEL_BATCH",
     "LOW_LEVEL_DEFAULTS",

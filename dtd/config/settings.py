@@ -14,6 +14,10 @@ import tyro
 from dtd.config.validation import validate
 from dtd.errors import ConfigError
 
+EVAL_SEED = 1_000_003
+"""Seed of evaluation episodes after training (dtd eval, render, heatmap, report, explore),
+apart from every seed a run trains with."""
+
 
 class Algo(enum.Enum):
     """The agents this package trains."""

@@ -21,6 +21,7 @@ import numpy as np
 from dtd.agents.interface import Agent
 from dtd.agents.records import Episodes
 from dtd.agents.segments import episode_plan
+from dtd.config import EVAL_SEED
 from dtd.envs.spec import EnvSpec
 from dtd.experiments.figures import pyplot
 from dtd.training.rollout import run_episodes
@@ -313,7 +314,7 @@ def render_run(
     episodes: int,
     out: Path,
     checkpoint: str = "latest",
-    seed: int = 1_000_003,
+    seed: int = EVAL_SEED,
     width: int = 480,
     height: int = 480,
 ) -> list[RenderedFiles]:

@@ -13,7 +13,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from dtd.config import Algo, flat_items
+from dtd.config import EVAL_SEED, Algo, flat_items
 from dtd.experiments.curves import Curve, read_curve
 from dtd.experiments.run_curves import RunCurve, final_success
 from dtd.training.atomic import ensure_writable, write_text_atomic
@@ -74,7 +74,7 @@ class Report:
 
 
 def write_report(
-    run_dir: Path, episodes: int = 3, checkpoint: str = "latest", seed: int = 1_000_003, resolution: int = 60
+    run_dir: Path, episodes: int = 3, checkpoint: str = "latest", seed: int = EVAL_SEED, resolution: int = 60
 ) -> Report:
     """Render ``episodes`` episodes, draw the curves (and, for dtd on a Fetch block task, the
     heatmaps after the first epoch and at ``checkpoint``) and write ``RUN/report.html``."""

@@ -12,7 +12,7 @@ import gymnasium as gym
 
 from dtd.agents.dot_to_dot import DotToDotAgent
 from dtd.agents.interface import Agent
-from dtd.config import Algo, Collection, Device, TrainConfig
+from dtd.config import EVAL_SEED, Algo, Collection, Device, TrainConfig
 from dtd.errors import ConfigError
 from dtd.training.atomic import write_text_atomic
 from dtd.training.checkpoint import check_checkpoint, load_checkpoint, restoring
@@ -30,10 +30,6 @@ class LoadedRun:
     checkpoint: Path
     snapshot: dict[str, Any]
     components: Components
-
-
-EVAL_SEED = 1_000_003
-"""Seed of evaluation episodes after training, apart from every seed a run trains with."""
 
 
 def load_run(

@@ -43,6 +43,8 @@ def pages() -> dict[str, str]:
     for command in COMMANDS:
         result = run(command, "--help")
         assert result.returncode == 0, result.stderr
+        # The checks below read the entries: a page whose layout they cannot read fails here.
+        assert len(entries(result.stdout)) >= 2, (command, result.stdout)
         pages[command] = result.stdout
     return pages
 

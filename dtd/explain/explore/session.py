@@ -23,7 +23,7 @@ import numpy as np
 
 from dtd.agents.dot_to_dot import DotToDotAgent
 from dtd.agents.segments import episode_plan
-from dtd.config import Algo, Collection, Device
+from dtd.config import EVAL_SEED, Algo, Collection, Device
 from dtd.errors import CheckpointError, ConfigError, DtdError, EnvError
 from dtd.explain.heatmap import (
     PlacedStart,
@@ -36,7 +36,6 @@ from dtd.explain.heatmap import (
 from dtd.training.checkpoint import check_checkpoint, load_checkpoint, restoring
 from dtd.training.components import build, close_all
 from dtd.training.run_dir import RunDir, read_config
-from dtd.training.trained_run import EVAL_SEED
 
 MAP_RESOLUTION = 50
 """Cells along each side of the table in a value map, unless asked otherwise."""

@@ -32,6 +32,8 @@ from dtd.training.components import build, close_all
 from dtd.training.run_dir import RunDir, read_config, write_config
 from tests.helpers import TINY, dtd
 
+pytestmark = pytest.mark.smoke
+
 pytest.importorskip("fastapi", reason="dtd explore needs the [explore] extra")
 
 BLOCK = (1.15, 0.55)

@@ -21,6 +21,8 @@ from dtd.training.components import close_all
 from dtd.training.rollout import run_many
 from tests.helpers import TINY, dtd
 
+pytestmark = pytest.mark.smoke
+
 onnxruntime = pytest.importorskip("onnxruntime", reason="dtd export needs the [export] extra")
 
 RECORDED = 1_000

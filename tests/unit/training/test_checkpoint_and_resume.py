@@ -66,7 +66,10 @@ def test_episodes_are_collected_beside_the_learner_where_a_core_is_free(
 
 def test_one_torch_thread_unless_asked_for_more(monkeypatch):
     monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
-    monkeypatch.setattr(components, "usable_cores", lambda: 16)
+    # However many cores the process may use (as usable_cores asks the system).
+    monkeypatch.setattr(components.os, "sched_getaffinity", lambda _: set(range(16)), raising=False)
+    monkeypatch.setattr(components.os, "cpu_count", lambda: 16)
+    assert components.usable_cores() == 16
     assert components.resolved_threads(0) == 1
     assert components.resolved_threads(3) == 3  # given threads are kept
     monkeypatch.setenv("OMP_NUM_THREADS", "2")
