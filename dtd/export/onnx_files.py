@@ -221,7 +221,8 @@ def describe(
         "goal_box": {"low": list(spec.goal_low), "high": list(spec.goal_high)},
         "goal_quaternion": list(spec.quaternion) if spec.quaternion else None,
         "checkpoint": {
-            "path": str(loaded.checkpoint),
+            "run": loaded.run.root.name,
+            "path": loaded.run.named(loaded.checkpoint),
             "epoch": state["epoch"],
             "env_steps": state["env_steps"],
         },
@@ -286,11 +287,12 @@ print(json.dumps({{"success": success, "steps": t + 1, "achieved_goal": o["achie
     when = "when to ask for the next sub-goal (`segments`), " if dtd else ""
     return f"""# {policy["algo"]} on {policy["env_id"]}, exported
 
-From `{checkpoint["path"]}` (epoch {checkpoint["epoch"]}, {checkpoint["env_steps"]:,} env steps), by
-`dtd export`. ONNX opset {policy["opset"]}; every input and output is float32 with a batch dimension
-of any size. Inputs are the environment's raw values: clipping, normalisation and the scaling of
-actions (and of sub-goals into the goal box) are inside the models. On random inputs the
-models' outputs differed from the torch agent's by at most
+From `{checkpoint["path"]}` of the run `{checkpoint["run"]}` (epoch {checkpoint["epoch"]},
+{checkpoint["env_steps"]:,} env steps), by `dtd export`. ONNX opset {policy["opset"]}; every
+input and output is float32 with a batch dimension of any size. Inputs are the environment's
+raw values: clipping, normalisation and the scaling of actions (and of sub-goals into the goal
+box) are inside the models. On random inputs the models' outputs differed from the torch
+agent's by at most
 {policy["largest_difference_from_torch"]:.1e}.
 
 {files}

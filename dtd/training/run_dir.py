@@ -114,6 +114,15 @@ class RunDir:
         for path in (self.checkpoints, self.tensorboard):
             shutil.rmtree(path, ignore_errors=True)
 
+    def named(self, path: Path | str) -> str:
+        """``path`` as a run's own files name it: relative to the run (``checkpoints/latest.pt``)
+        where it lies inside, so that what the run writes reads the same on any machine; else
+        as given."""
+        try:
+            return Path(path).resolve().relative_to(self.root.resolve()).as_posix()
+        except ValueError:
+            return str(path)
+
     def checkpoint(self, name: str) -> Path:
         """``latest``, ``best``, ``first``, or a path to a checkpoint file; a bare name that is
         none of these is a :class:`RunDirError` listing what may be given."""

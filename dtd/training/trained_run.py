@@ -118,9 +118,13 @@ def saved_evaluation_path(run_dir: Path | str, checkpoint: str = "latest") -> Pa
 
 
 def save_evaluation(result: dict[str, Any], run_dir: Path | str, checkpoint: str = "latest") -> Path:
-    """Write an :func:`evaluate_run` result (without its plans) beside the run, atomically."""
+    """Write an :func:`evaluate_run` result (without its plans) beside the run, atomically;
+    the checkpoint named relative to the run (the file lies in it, so it names no run
+    directory), so that the run reads the same when copied elsewhere."""
     path = saved_evaluation_path(run_dir, checkpoint)
-    kept = {key: value for key, value in result.items() if key != "plans"}
+    run = RunDir(Path(run_dir))
+    kept = {key: value for key, value in result.items() if key not in ("plans", "run_dir")}
+    kept["checkpoint"] = run.named(result["checkpoint"])
     write_text_atomic(path, json.dumps(kept, indent=1) + "\n")
     return path
 

@@ -42,7 +42,13 @@ def test_a_saved_evaluation_is_the_final_plot_stats_takes(tmp_path, reach_run):
     assert result.returncode == 0, result.stderr
     saved = json.loads((run / "eval-latest.json").read_text())
     assert saved["episodes"] == 4 and saved["epoch"] == 3
-    assert saved == {k: v for k, v in json.loads(result.stdout.splitlines()[-1]).items() if k != "plans"}
+    printed = json.loads(result.stdout.splitlines()[-1])
+    assert printed["checkpoint"] == str(run / "checkpoints" / "latest.pt")
+    # What the run keeps names its own files relative to itself: it reads the same when copied.
+    assert saved["checkpoint"] == "checkpoints/latest.pt" and "run_dir" not in saved
+    assert saved == {k: v for k, v in printed.items() if k not in ("plans", "run_dir", "checkpoint")} | {
+        "checkpoint": "checkpoints/latest.pt"
+    }
     # One run gives no interval: refused in one line, nothing written.
     result = dtd("plot", tmp_path / "runs", "--stats", "--out", tmp_path / "figures")
     assert result.returncode == 2 and "one run" in result.stderr, result.stderr

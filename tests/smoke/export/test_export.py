@@ -64,12 +64,14 @@ def session(folder: Path, role: str):
     return onnxruntime.InferenceSession(str(folder / policy["models"][role]["file"]))
 
 
-def test_policy_json_says_what_a_program_needs(exported):
+def test_policy_json_says_what_a_program_needs(exported, push_dtd_run):
     dtd_policy = json.loads((exported["dtd"] / "policy.json").read_text())
     assert dtd_policy["env_id"] == "FetchPush-v4" and dtd_policy["algo"] == "dtd"
     assert set(dtd_policy["models"]) == {"low_level", "high_level", "high_level_value"}
     assert dtd_policy["segments"]["bounds"][0] == 0 and dtd_policy["segments"]["bounds"][-1] == 50
     assert dtd_policy["checkpoint"]["epoch"] == 2 and dtd_policy["opset"] >= 13
+    assert dtd_policy["checkpoint"]["path"] == "checkpoints/latest.pt"
+    assert dtd_policy["checkpoint"]["run"] == push_dtd_run.name
     assert {"dtd", "torch", "onnx", "onnxruntime"} <= set(dtd_policy["versions"])
     assert len(dtd_policy["goal_box"]["low"]) == 3
     her_policy = json.loads((exported["her"] / "policy.json").read_text())
