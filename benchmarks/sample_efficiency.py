@@ -39,7 +39,7 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=3, help="seeds 0..N-1")
     parser.add_argument("--steps", type=int, default=200_000, help="env steps per seed")
     parser.add_argument("--out", type=Path, required=True, help="one run directory per seed goes here")
-    parser.add_argument("--workers", type=int, default=None, help="runs at once (default: one per core)")
+    parser.add_argument("--parallel", type=int, default=None, help="runs at once (default: one per core)")
     parser.add_argument(
         "--set",
         action="append",
@@ -50,7 +50,7 @@ def main() -> None:
     args = parser.parse_args()
 
     cores = usable_cores()
-    workers = args.workers or max(1, min(args.seeds, cores))
+    workers = args.parallel or max(1, min(args.seeds, cores))
     base = with_settings(preset_config(Preset(args.preset), env=args.env, algo=Algo(args.algo)), args.set)
     base = sharing_cores(base, workers, cores)
     base = with_settings(base, [f"epochs={epochs_for_steps(base, args.steps)}"])

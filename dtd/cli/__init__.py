@@ -51,6 +51,11 @@ def main(argv: list[str] | None = None) -> None:
     try:
         if args[:1] == ["sweep"] and any(arg == "--algo" or arg.startswith("--algo=") for arg in args):
             raise DtdError("dtd sweep takes --algos (comma-separated), not --algo")
+        if args[:1] == ["sweep"] and any(arg == "--workers" or arg.startswith("--workers=") for arg in args):
+            raise DtdError(
+                "dtd sweep takes --parallel N (trials at once), not --workers (dtd train's "
+                "data-parallel workers of one run)"
+            )
         command = parse_command(commands, DESCRIPTION, args)
         command()
     except DtdError as exc:

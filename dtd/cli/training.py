@@ -138,7 +138,7 @@ def sweep(
     out: Path,
     algos: str = "ddpg,her,dtd",
     seeds: int = 5,
-    workers: int = 0,
+    parallel: int = 0,
     ray: Annotated[str | None, optional("ADDRESS", "local processes")] = None,
     progress: bool = True,
     final_episodes: int = 0,
@@ -168,7 +168,7 @@ def sweep(
         out: Directory of the trials' run directories (on a cluster: a path every node reaches).
         algos: Comma-separated algorithms, each trained with every seed.
         seeds: Seeds per algorithm: --seed, --seed + 1, ...
-        workers: Local trials at once (0: one per core); they share the cores' torch threads.
+        parallel: Local trials at once (0: one per core); they share the cores' torch threads.
         ray: Run on Ray instead: auto, local or a cluster address (needs pip install 'dtd[ray]').
         progress: Show a live progress bar.
         final_episodes: Once a trial is trained, evaluate its last checkpoint over this many
@@ -184,7 +184,7 @@ def sweep(
     from dtd.errors import ConfigError
     from dtd.experiments.run_curves import find_runs
     from dtd.experiments.summary import summaries, summary_table
-    from dtd.experiments.sweep import run_sweep, sweep_trials, workers_for
+    from dtd.experiments.sweep import run_sweep, sweep_trials, trials_at_once
     from dtd.training.atomic import ensure_writable
 
     try:
@@ -192,10 +192,10 @@ def sweep(
     except ValueError as exc:
         raise ConfigError(f"--algos: {exc}; choose from {', '.join(a.value for a in Algo)}") from exc
     trials = sweep_trials(config, chosen, seeds, out, final_episodes, grid)
-    workers_for(trials, workers)  # refused before anything is written
+    trials_at_once(trials, parallel)  # refused before anything is written
     ensure_writable(out, "the sweep's runs")
     with _terminated_as_interrupted():
-        outcomes = run_sweep(trials, workers=workers, ray_address=ray, show_progress=progress)
+        outcomes = run_sweep(trials, parallel=parallel, ray_address=ray, show_progress=progress)
     failed = [outcome for outcome in outcomes if not outcome.ok]
     for outcome in failed:
         print(f"{outcome.trial.name} failed:\n{outcome.error}", file=sys.stderr)

@@ -112,11 +112,11 @@ def sweep_trials(
     return trials
 
 
-def workers_for(trials: Sequence[Trial], workers: int) -> int:
-    """``workers``, or for 0 one per usable core (never more than there are trials)."""
-    if workers < 0:
-        raise ConfigError(f"--workers must be 0 (one per core) or more, got {workers}")
-    return workers or max(1, min(len(trials), usable_cores()))
+def trials_at_once(trials: Sequence[Trial], parallel: int) -> int:
+    """``parallel``, or for 0 one per usable core (never more than there are trials)."""
+    if parallel < 0:
+        raise ConfigError(f"--parallel must be 0 (one per core) or more, got {parallel}")
+    return parallel or max(1, min(len(trials), usable_cores()))
 
 
 LOG_LINE_EVERY_S = 60.0
@@ -190,14 +190,14 @@ class SweepProgress:
 
 def run_sweep(
     trials: Sequence[Trial],
-    workers: int = 0,
+    parallel: int = 0,
     ray_address: str | None = None,
     show_progress: bool = True,
 ) -> list[TrialOutcome]:
-    """Run ``trials`` locally (``workers`` processes, 0 = one per core) or on Ray; return the
-    outcomes in the order of ``trials``."""
+    """Run ``trials`` locally (``parallel`` at once, each in a process; 0 = one per core) or on
+    Ray; return the outcomes in the order of ``trials``."""
     if ray_address is None:
-        count = workers_for(trials, workers)
+        count = trials_at_once(trials, parallel)
         trials = [
             dataclasses.replace(t, config=sharing_cores(t.config, count, usable_cores())) for t in trials
         ]

@@ -128,6 +128,6 @@ def test_checkpoint_that_does_not_fit_the_agent(tmp_path, reach_run):
 
 def test_a_sweep_refused_leaves_no_directory(tmp_path):
     out = tmp_path / "sweep"
-    result = dtd("sweep", "--env", "FetchReach-v4", "--algos", "her", *TINY, "--workers", "-1", "--out", out)
-    assert_refused(result, "--workers must be 0 (one per core) or more, got -1")
+    result = dtd("sweep", "--env", "FetchReach-v4", "--algos", "her", *TINY, "--parallel", "-1", "--out", out)
+    assert_refused(result, "--parallel must be 0 (one per core) or more, got -1")
     assert not out.exists()

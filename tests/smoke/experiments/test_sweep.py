@@ -65,7 +65,7 @@ def children(pid: int) -> list[int]:
 def test_an_interrupted_sweep_run_again_skips_finished_trials_and_resumes_the_others(tmp_path):
     out = tmp_path / "sweep"
     process = subprocess.Popen(
-        [sys.executable, "-m", "dtd", *SWEEP, "--workers", "1", "--out", str(out)],
+        [sys.executable, "-m", "dtd", *SWEEP, "--parallel", "1", "--out", str(out)],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
@@ -90,7 +90,7 @@ def test_an_interrupted_sweep_run_again_skips_finished_trials_and_resumes_the_ot
     finished_files = {path: path.stat().st_mtime_ns for path in finished}
     rows_before = read_metrics(second)
 
-    result = dtd(*SWEEP, "--workers", "2", "--out", out)
+    result = dtd(*SWEEP, "--parallel", "2", "--out", out)
     assert result.returncode == 0, result.stderr
     assert "4 of 4 trials finished" in result.stdout
     assert all(epochs_recorded(out / name) == EPOCHS for name in NAMES)
@@ -102,7 +102,7 @@ def test_an_interrupted_sweep_run_again_skips_finished_trials_and_resumes_the_ot
     assert ["FetchReach-v4", "her", "2", str(EPOCHS)] in [line[:4] for line in lines]
     assert ["FetchReach-v4", "dtd", "2", str(EPOCHS)] in [line[:4] for line in lines]
 
-    again = dtd(*SWEEP, "--workers", "2", "--out", out)
+    again = dtd(*SWEEP, "--parallel", "2", "--out", out)
     assert again.returncode == 0, again.stderr
     assert [read_metrics(out / name)[-1]["epoch"] for name in NAMES] == [str(EPOCHS)] * 4
 
@@ -139,7 +139,7 @@ def stopped(process: subprocess.Popen[str], workers: list[int]) -> str:
 
 def test_ctrl_c_stops_the_running_trial_and_starts_no_queued_one(tmp_path):
     out = tmp_path / "sweep"
-    process = start_sweep(out, "--workers", "1")
+    process = start_sweep(out, "--parallel", "1")
     workers = children(process.pid)
     os.killpg(process.pid, signal.SIGINT)  # Ctrl-C as a terminal sends it: to the whole group
     stderr = stopped(process, workers)
@@ -150,13 +150,13 @@ def test_ctrl_c_stops_the_running_trial_and_starts_no_queued_one(tmp_path):
     assert [epochs_recorded(out / f"FetchReach-v4-her-s{seed}") for seed in (1, 2)] == [0, 0]
     rows_before = read_metrics(out / "FetchReach-v4-her-s0")
 
-    result = dtd(*HER_SWEEP, "--workers", "2", "--out", out)
+    result = dtd(*HER_SWEEP, "--parallel", "2", "--out", out)
     assert result.returncode == 0, result.stderr
     assert [epochs_recorded(out / f"FetchReach-v4-her-s{seed}") for seed in range(3)] == [EPOCHS] * 3
     assert read_metrics(out / "FetchReach-v4-her-s0")[:interrupted_at] == rows_before
 
 
-@pytest.mark.parametrize("runner", [["--workers", "2"], ["--ray", "local"]], ids=["processes", "ray"])
+@pytest.mark.parametrize("runner", [["--parallel", "2"], ["--ray", "local"]], ids=["processes", "ray"])
 def test_sigterm_to_the_sweep_alone_stops_its_trials_too(tmp_path, runner):
     if "--ray" in runner:
         pytest.importorskip("ray")
@@ -184,6 +184,8 @@ def test_a_failing_trial_is_reported_and_the_others_finish(tmp_path):
 def test_sweep_refuses_algo_and_unknown_algos(tmp_path):
     result = dtd(*SWEEP, "--algo", "her", "--out", tmp_path)
     assert result.returncode == 2 and "--algos" in result.stderr
+    result = dtd(*SWEEP, "--workers", "2", "--out", tmp_path / "never")
+    assert result.returncode == 2 and "--parallel N" in result.stderr and not (tmp_path / "never").exists()
     result = dtd(*SWEEP[:4], "her,sac", "--out", tmp_path)
     assert result.returncode == 2 and "sac" in result.stderr
 

@@ -8,7 +8,7 @@ from rich.console import Console
 
 from dtd.config import Algo, Collection, LearnerKind, TrainConfig
 from dtd.errors import ConfigError, DtdError
-from dtd.experiments.sweep import SweepProgress, sweep_trials, workers_for
+from dtd.experiments.sweep import SweepProgress, sweep_trials, trials_at_once
 from dtd.experiments.trials import Trial, import_ray, sharing_cores
 
 
@@ -74,11 +74,11 @@ def test_trials_running_together_share_the_cores():
 def test_workers_default_to_one_per_core_but_no_more_than_trials(tmp_path, monkeypatch):
     monkeypatch.setattr("dtd.experiments.sweep.usable_cores", lambda: 4)
     trials = [Trial(TrainConfig(env="FetchReach-v4"), tmp_path / str(n)) for n in range(3)]
-    assert workers_for(trials, 0) == 3
-    assert workers_for(trials * 2, 0) == 4
-    assert workers_for(trials, 2) == 2
+    assert trials_at_once(trials, 0) == 3
+    assert trials_at_once(trials * 2, 0) == 4
+    assert trials_at_once(trials, 2) == 2
     with pytest.raises(ConfigError):
-        workers_for(trials, -1)
+        trials_at_once(trials, -1)
 
 
 def test_without_ray_the_error_says_how_to_install_it(monkeypatch):
