@@ -302,16 +302,19 @@ def serve(run_dir: Path, host: str, port: int, videos: Path, ready: Callable[[st
     episode_worker = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="episodes")
     map_worker = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="maps")
     starting = [worker.submit(Explorer, run_dir, videos) for worker in (episode_worker, map_worker)]
-    explorers: list[Explorer] = []
+    concurrent.futures.wait(starting)
+    explorers = [started.result() for started in starting if started.exception() is None]
     try:
-        explorers = [started.result() for started in starting]
+        if len(explorers) < len(starting):  # one could not start: the others are closed below
+            raise next(started.exception() for started in starting if started.exception() is not None)
         app = create_app(*explorers, episode_worker, map_worker, allowed_hosts(host))
         server = uvicorn.Server(uvicorn.Config(app, log_level="warning", access_log=False))
         ready(url_of(sock))
         server.run(sockets=[sock])
     finally:
-        for worker, explorer in zip((episode_worker, map_worker), explorers, strict=False):
-            worker.submit(explorer.close).result()
+        for worker, started in zip((episode_worker, map_worker), starting, strict=True):
+            if started.exception() is None:
+                worker.submit(started.result().close).result()
         for worker in (episode_worker, map_worker):
             worker.shutdown(cancel_futures=True)
         sock.close()
