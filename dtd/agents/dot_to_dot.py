@@ -123,6 +123,10 @@ class DotToDotAgent:
         """The current probability of a perturbation sub-goal in training episodes."""
         return self.exploration.schedule.eps(self.buffer.episodes_added)
 
+    def planner(self) -> DotToDotAgent:
+        """Itself: what explaining and exporting ask of a high level it answers."""
+        return self
+
     def propose_subgoals(
         self, obs: np.ndarray, achieved_goal: np.ndarray, desired_goal: np.ndarray
     ) -> np.ndarray:

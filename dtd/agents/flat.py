@@ -80,6 +80,10 @@ class GoalConditionedAgent:
             terminal_fn=self.goals.terminal,
         )
 
+    def planner(self) -> None:
+        """None: a flat agent sets itself no sub-goals."""
+        return None
+
     def episode_metrics(self, episodes: Episodes) -> dict[str, float]:
         return {}
 

@@ -1,8 +1,9 @@
-"""What every agent offers the rollout and the trainer, and the mean of its update diagnostics."""
+"""What every agent offers the rollout and the trainer, what an agent that sets itself sub-goals
+offers those who look inside it, and the mean of an agent's update diagnostics."""
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any, Protocol
 
 import numpy as np
@@ -10,8 +11,40 @@ import numpy as np
 from dtd.agents.records import Episodes
 
 
+class Planner(Protocol):
+    """An agent's high level, as explaining and exporting see it: where its segments begin,
+    the sub-goals it proposes, their values, and the plans of played episodes."""
+
+    bounds: np.ndarray
+    """Steps at which the segments begin, and the horizon last."""
+
+    def propose_subgoals(
+        self, obs: np.ndarray, achieved_goal: np.ndarray, desired_goal: np.ndarray
+    ) -> np.ndarray:
+        """The high level's deterministic sub-goals for a batch."""
+        ...
+
+    def subgoal_values(
+        self, observation: Mapping[str, np.ndarray], goal: np.ndarray, candidates: np.ndarray
+    ) -> np.ndarray:
+        """The high level's value of each candidate sub-goal from one dict observation."""
+        ...
+
+    def plan(self, episodes: Episodes) -> list[dict[str, Any]]:
+        """Each episode's start, sub-goals, segment ends and goal, in numbers."""
+        ...
+
+    def placement_by_distance(self, episodes: Episodes, groups: int = 3) -> list[dict[str, Any]]:
+        """Where the sub-goals lay along the way, per group of goal distances."""
+        ...
+
+
 class Agent(Protocol):
     """What the rollout and the trainer need of an agent."""
+
+    def planner(self) -> Planner | None:
+        """Its high level, for an agent that sets itself sub-goals; None for a flat agent."""
+        ...
 
     def step_goal(
         self,

@@ -29,6 +29,12 @@ class Algo(enum.Enum):
     dtd = "dtd"
     """Dot-to-Dot: a high-level sub-goal policy over a low-level HER agent, HER at both levels."""
 
+    @property
+    def sets_subgoals(self) -> bool:
+        """Whether the agent has a high level that sets it sub-goals (plans, maps, sub-goal
+        figures)."""
+        return self is Algo.dtd
+
 
 class RelabelWindow(enum.Enum):
     """How far ahead the low level of Dot-to-Dot draws its relabelled goals from."""

@@ -18,7 +18,7 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
-from dtd.agents.dot_to_dot import DotToDotAgent
+from dtd.agents.interface import Planner
 from dtd.envs.time_feature import as_observed
 from dtd.errors import ConfigError, EnvError
 from dtd.experiments.figures import pyplot
@@ -130,7 +130,7 @@ class PlacedStart(gym.Wrapper):
 
 
 def value_slice(
-    agent: DotToDotAgent, observation: dict[str, np.ndarray], table: Table, z: float | None, resolution: int
+    planner: Planner, observation: dict[str, np.ndarray], table: Table, z: float | None, resolution: int
 ) -> Heatmap:
     """The high level's values over a ``resolution`` x ``resolution`` grid of sub-goals
     (cell centres) covering the table top at height ``z`` (None: sub-goals are points x, y)."""
@@ -142,8 +142,8 @@ def value_slice(
     columns = [grid_x.ravel(), grid_y.ravel()] + ([] if z is None else [np.full(grid_x.size, z)])
     candidates = np.stack(columns, axis=1)
     goal = np.asarray(observation["desired_goal"], dtype=np.float64)
-    values = agent.subgoal_values(observation, goal, candidates).reshape(len(ys), len(xs))
-    subgoal = agent.propose_subgoals(
+    values = planner.subgoal_values(observation, goal, candidates).reshape(len(ys), len(xs))
+    subgoal = planner.propose_subgoals(
         observation["observation"][None], observation["achieved_goal"][None], goal[None]
     )[0]
     return Heatmap(xs, ys, z, values, np.asarray(observation["achieved_goal"]), goal, subgoal)
@@ -209,14 +209,13 @@ def run_heatmaps(
     in the air (FetchPickAndPlace) also 10, 20 and 30 cm above it. A task with planar goals
     (x, y) is mapped over its goal box, from its own start and goal after a reset with
     ``seed``."""
-    from dtd.config import Algo
     from dtd.training.atomic import ensure_writable
     from dtd.training.components import close_all
     from dtd.training.run_dir import RunDir, read_config
     from dtd.training.trained_run import load_run
 
     config = read_config(RunDir(Path(run_dir)))
-    if config.algo is not Algo.dtd:
+    if not config.algo.sets_subgoals:
         raise ConfigError(
             f"heatmaps show a dtd run's high level; {run_dir} is a {config.algo.value} run, which has none"
         )
@@ -228,8 +227,8 @@ def run_heatmaps(
     for name in checkpoints:
         loaded = load_run(Path(run_dir), name)
         try:
-            env, agent = loaded.components.eval_envs[0], loaded.components.agent
-            assert isinstance(agent, DotToDotAgent)
+            env, agent = loaded.components.eval_envs[0], loaded.components.agent.planner()
+            assert agent is not None  # a run whose agent sets sub-goals (checked above)
             spec = loaded.components.spec
             if spec.goal_dim == 2 and spec.quaternion is None:
                 if start is not None or goal is not None or heights is not None:

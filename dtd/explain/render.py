@@ -322,7 +322,6 @@ def render_run(
     MP4 and a PNG strip of key frames, and ``plans.json`` with every episode's plan."""
     import json
 
-    from dtd.agents.dot_to_dot import DotToDotAgent
     from dtd.errors import ConfigError
     from dtd.training.atomic import ensure_writable, write_text_atomic
     from dtd.training.components import close_all
@@ -336,12 +335,13 @@ def render_run(
     loaded = load_run(Path(run_dir), checkpoint, seed, envs=1)
     components = loaded.components
     env, agent, spec = components.eval_envs[0], components.agent, components.spec
-    bounds = agent.bounds if isinstance(agent, DotToDotAgent) else None
+    planner = agent.planner()
+    bounds = planner.bounds if planner is not None else None
+    plan_of = planner.plan if planner is not None else None
     renderer = SceneRenderer(env, width, height, camera_for(spec.env_id))
     written = []
     try:
         for number in range(1, episodes + 1):
-            plan_of = agent.plan if isinstance(agent, DotToDotAgent) else None
             rendered = render_episode(env, agent, spec, renderer, components.rng, bounds, plan_of)
             name = f"episode-{number}"
             title = (
@@ -353,9 +353,7 @@ def render_run(
                 RenderedFiles(
                     write_video(rendered.frames, Path(out) / f"{name}.mp4"),
                     write_strip(rendered, Path(out) / f"{name}-keyframes.png", title),
-                    agent.plan(rendered.episode)[0]
-                    if isinstance(agent, DotToDotAgent)
-                    else episode_plan(rendered.episode, 0, None),
+                    plan_of(rendered.episode)[0] if plan_of else episode_plan(rendered.episode, 0, None),
                 )
             )
     finally:

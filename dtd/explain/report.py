@@ -13,7 +13,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from dtd.config import EVAL_SEED, Algo, flat_items
+from dtd.config import EVAL_SEED, flat_items
 from dtd.experiments.curves import Curve, read_curve
 from dtd.experiments.run_curves import RunCurve, final_success
 from dtd.training.atomic import ensure_writable, write_text_atomic
@@ -97,9 +97,9 @@ def write_report(
         sections.append(_section("Training", picture))
 
     spec = json.loads(run.config.read_text()).get("derived", {}).get("spec", {})
-    if config.algo is Algo.dtd and spec.get("quaternion"):
+    if config.algo.sets_subgoals and spec.get("quaternion"):
         sections.append(_section("The high level's values", _NO_MAP_FOR_ROTATIONS))
-    elif config.algo is Algo.dtd:
+    elif config.algo.sets_subgoals:
         sections.append(_heatmap_section(run, checkpoint, resolution, assets))
 
     rendered = render_run(run.root, episodes, assets_dir / "episodes", checkpoint, seed)
@@ -112,7 +112,7 @@ def write_report(
             + f'<video controls preload="metadata" src="{_relative(files.video, run.root)}"></video>'
         )
     planar = spec.get("goal_dim") == 2 and not spec.get("quaternion")
-    legend = marker_legend(bool(spec.get("quaternion")), config.algo is Algo.dtd, planar).capitalize() + "."
+    legend = marker_legend(bool(spec.get("quaternion")), config.algo.sets_subgoals, planar).capitalize() + "."
     sections.append(_section("Episodes", f"<p>{legend}</p>" + "".join(parts)))
     sections.append(_section("Plans", _plans_table([files.plan for files in rendered])))
     sections.append(_section("Questioning the run", _explore_note(run, config, bool(spec.get("quaternion")))))
@@ -182,7 +182,7 @@ def _explore_note(run: RunDir, config: Any, rotation: bool) -> str:
     command = html.escape(f"dtd explore {run.root}")
     if rotation:
         what = "play episodes of any epoch kept and read their plans"
-    elif config.algo is Algo.dtd:
+    elif config.algo.sets_subgoals:
         what = (
             "drag the block and the goal and watch the high level's values and its chosen sub-goal "
             "follow them, after any epoch kept, and play episodes from any placement"

@@ -10,9 +10,8 @@ from typing import Any
 
 import gymnasium as gym
 
-from dtd.agents.dot_to_dot import DotToDotAgent
 from dtd.agents.interface import Agent
-from dtd.config import EVAL_SEED, Algo, Collection, Device, TrainConfig
+from dtd.config import EVAL_SEED, Collection, Device, TrainConfig
 from dtd.errors import ConfigError
 from dtd.training.atomic import write_text_atomic
 from dtd.training.checkpoint import check_checkpoint, load_checkpoint, restoring
@@ -70,12 +69,12 @@ def evaluate_run(
 ) -> dict[str, Any]:
     """Deterministic episodes of a trained agent; the figures as a dict. For a dtd run also
     ``subgoal_placement``, where the sub-goals lay along the way by the goal's distance (see
-    :meth:`DotToDotAgent.placement_by_distance`), and with ``show_subgoals`` ``plans``, the
+    :meth:`Planner.placement_by_distance`), and with ``show_subgoals`` ``plans``, the
     high level's sub-goals per episode."""
     if episodes < 1:
         raise ConfigError(f"--episodes must be at least 1, got {episodes}")
     config = read_config(RunDir(Path(run_dir)))
-    if show_subgoals and config.algo is not Algo.dtd:
+    if show_subgoals and not config.algo.sets_subgoals:
         raise ConfigError(f"--show-subgoals needs a dtd run; {run_dir} is a {config.algo.value} run")
     loaded = load_run(run_dir, checkpoint, seed, envs=min(episodes, 10))
     components = loaded.components
@@ -104,10 +103,11 @@ def evaluate_run(
         "mean_final_distance": figures.pop("final_distance"),
         **figures,
     }
-    if isinstance(components.agent, DotToDotAgent):
-        result["subgoal_placement"] = components.agent.placement_by_distance(played)
+    planner = components.agent.planner()
+    if planner is not None:
+        result["subgoal_placement"] = planner.placement_by_distance(played)
         if show_subgoals:
-            result["plans"] = components.agent.plan(played)
+            result["plans"] = planner.plan(played)
     return result
 
 

@@ -21,9 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from dtd.agents.dot_to_dot import DotToDotAgent
 from dtd.agents.segments import episode_plan
-from dtd.config import EVAL_SEED, Algo, Collection, Device
+from dtd.config import EVAL_SEED, Collection, Device
 from dtd.errors import CheckpointError, ConfigError, DtdError, EnvError
 from dtd.explain.heatmap import (
     PlacedStart,
@@ -92,10 +91,10 @@ class Explorer:
         """The table of a Fetch block task, where the block and the goal can be placed."""
         with contextlib.suppress(EnvError):
             self.placement_table = table_of(self.env)
-        self.table = self.placement_table if self.config.algo is Algo.dtd else None
+        self.table = self.placement_table if self.config.algo.sets_subgoals else None
         """The table the high level's values are mapped over (a dtd run on a Fetch block task)."""
         self.no_map_reason = ""
-        if self.config.algo is not Algo.dtd:
+        if not self.config.algo.sets_subgoals:
             self.no_map_reason = f"a {self.config.algo.value} run has no high level to map"
         elif self.table is None and self.spec.goal_dim == 2 and self.spec.quaternion is None:
             self.no_map_reason = (
@@ -132,7 +131,7 @@ class Explorer:
             "no_map_reason": self.no_map_reason,
             "placeable": self.placement_table is not None,
             "legend": marker_legend(
-                self.spec.quaternion is not None, self.config.algo is Algo.dtd, is_planar(self.spec)
+                self.spec.quaternion is not None, self.config.algo.sets_subgoals, is_planar(self.spec)
             ),
             "resolution": MAP_RESOLUTION,
             "progress": self._progress(),
@@ -174,7 +173,9 @@ class Explorer:
         snapshot = self._use_epoch(epoch)
         self._check_on_table(block, goal_point)
         observation = place_block_and_goal(self.env, block, goal_point)
-        heat = value_slice(self.agent, observation, table, height, resolution)
+        planner = self.agent.planner()
+        assert planner is not None  # a map is only offered for an agent that sets sub-goals
+        heat = value_slice(planner, observation, table, height, resolution)
         row, column = np.unravel_index(int(np.argmax(heat.values)), heat.values.shape)
         return {
             "epoch": snapshot.epoch,
@@ -217,9 +218,9 @@ class Explorer:
         if self.renderer is None:
             self.renderer = SceneRenderer(self.env, FRAME_SIZE, FRAME_SIZE, camera_for(self.spec.env_id))
         self.env.reset(seed=next(self.episode_seeds))
-        dtd = isinstance(self.agent, DotToDotAgent)
-        bounds = self.agent.bounds if dtd else None
-        plan_of = self.agent.plan if dtd else None
+        planner = self.agent.planner()
+        bounds = planner.bounds if planner is not None else None
+        plan_of = planner.plan if planner is not None else None
         rendered = render_episode(env, self.agent, self.spec, self.renderer, self.rng, bounds, plan_of)
         name = f"episode-{next(self.videos_made)}.mp4"
         write_video(rendered.frames, self.videos / name)
