@@ -23,7 +23,8 @@ import numpy as np
 
 from dtd.agents.segments import episode_plan
 from dtd.config import EVAL_SEED, Collection, Device
-from dtd.errors import CheckpointError, ConfigError, DtdError, EnvError
+from dtd.errors import CheckpointError, ConfigError, DtdError, EnvError, RunDirError
+from dtd.experiments.curves import read_curve
 from dtd.explain.heatmap import (
     PlacedStart,
     Table,
@@ -304,16 +305,13 @@ class Explorer:
 
     def _progress(self) -> dict[str, Any] | None:
         """The last finished epoch in metrics.csv (a run may still be training)."""
-        if not self.run.metrics.is_file():
-            return None
-        lines = self.run.metrics.read_text().strip().splitlines()
-        if len(lines) < 2:
-            return None
-        row = dict(zip(lines[0].split(","), lines[-1].split(","), strict=False))
         try:
-            return {"epoch": int(row["epoch"]), "env_steps": int(row["env_steps"])}
-        except (KeyError, ValueError):  # not a metrics file dtd wrote: say nothing of progress
+            curve = read_curve(self.run.root)
+        except RunDirError:  # not a metrics file dtd wrote (or caught half-written): say nothing
             return None
+        if len(curve) == 0:
+            return None
+        return {"epoch": int(curve.epoch[-1]), "env_steps": int(curve.env_steps[-1])}
 
     def _forget_old_videos(self) -> None:
         videos = sorted(self.videos.glob("episode-*.mp4"), key=lambda path: path.stat().st_mtime_ns)

@@ -140,6 +140,7 @@ def test_a_run_keeps_an_agent_only_snapshot_of_each_epoch(push_dtd_run):
 def test_the_map_is_the_high_levels_values_for_that_state(served, high_level):
     status, run = get(served + "api/run")
     assert status == 200 and run["epochs"] == [1, 2] and run["map"] and run["algo"] == "dtd"
+    assert run["progress"] == {"epoch": 2, "env_steps": 400}  # read from metrics.csv
     for epoch in (1, 2):
         status, answer = get(map_url(served, epoch))
         assert status == 200, answer
