@@ -32,7 +32,7 @@ def preload() -> None:
     import dtd.cli
     import dtd.envs.make
     import dtd.training.lifecycle  # noqa: F401
-    from dtd.experiments.figures import pyplot
+    from dtd.figures import pyplot
 
     pyplot()  # matplotlib, for the commands that draw
 

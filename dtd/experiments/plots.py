@@ -19,7 +19,6 @@ import numpy as np
 
 from dtd.errors import RunDirError
 from dtd.experiments.curves import Curve, band
-from dtd.experiments.figures import pyplot, save_figure
 from dtd.experiments.run_curves import cut_at, env_order, find_runs, grouped, label_colours
 from dtd.experiments.statistics import (
     check_intervals_possible,
@@ -30,6 +29,7 @@ from dtd.experiments.statistics import (
     statistics_table,
 )
 from dtd.experiments.summary import summaries, summary_csv, summary_table
+from dtd.figures import pyplot, save_figure
 from dtd.training.atomic import ensure_writable, write_text_atomic
 
 TASKS_FIGURE = "tasks"

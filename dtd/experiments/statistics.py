@@ -22,7 +22,6 @@ from pathlib import Path
 import numpy as np
 
 from dtd.errors import DtdError
-from dtd.experiments.figures import pyplot, save_figure
 from dtd.experiments.run_curves import (
     FinalSuccess,
     RunCurve,
@@ -32,6 +31,7 @@ from dtd.experiments.run_curves import (
     label_order,
 )
 from dtd.experiments.summary import span_text, steps_text
+from dtd.figures import pyplot, save_figure
 
 BOOTSTRAP_REPS = 10_000
 """Bootstrap replications of each confidence interval."""

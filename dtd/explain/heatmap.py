@@ -21,7 +21,7 @@ import numpy as np
 from dtd.agents.interface import Planner
 from dtd.envs.time_feature import as_observed
 from dtd.errors import ConfigError, EnvError
-from dtd.experiments.figures import pyplot
+from dtd.figures import pyplot
 
 DEFAULT_START = (1.15, 0.55)
 """The block's default place: near one corner of the table, as in the paper's figure."""

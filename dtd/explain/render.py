@@ -23,7 +23,7 @@ from dtd.agents.records import Episodes
 from dtd.agents.segments import episode_plan
 from dtd.config import EVAL_SEED
 from dtd.envs.spec import EnvSpec
-from dtd.experiments.figures import pyplot
+from dtd.figures import pyplot
 from dtd.training.rollout import run_episodes
 
 GOAL_RGBA = (0.9, 0.05, 0.05, 1.0)

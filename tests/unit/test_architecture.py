@@ -16,7 +16,7 @@ PACKAGE = Path(dtd.__file__).parent
 WINGS = ("envs", "agents", "training", "experiments", "explain", "export", "cli")
 """The package's parts from the bottom up: each may import the ones before it, never one after."""
 
-BASE = ("config", "errors")
+BASE = ("config", "errors", "figures")
 """Imported by every wing; they import nothing of dtd but each other."""
 
 

@@ -1,5 +1,5 @@
 """Drawing matplotlib figures the way every figure of dtd is drawn (off screen) and kept (PNG and
-SVG side by side)."""
+SVG side by side): below every wing, for the figures of sweeps and of explained runs alike."""
 
 from __future__ import annotations
 
