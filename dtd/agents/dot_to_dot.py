@@ -1,5 +1,5 @@
 """The Dot-to-Dot agent: a high level that places sub-goals ("dots") and a low level that
-reaches them, both the same DDPG learner, both trained with hindsight relabelling."""
+reaches them, both the same learner, both trained with hindsight relabelling."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from dtd.agents import subgoal_report
 from dtd.agents.buffer import EpisodeBuffer
 from dtd.agents.exploration import ActionNoise
 from dtd.agents.her import sample_transitions
@@ -18,12 +19,9 @@ from dtd.agents.networks import SubgoalHead
 from dtd.agents.records import Batch, Episodes
 from dtd.agents.rotations import multiply, random_rotations
 from dtd.agents.segments import (
-    episode_plan,
-    goal_separation,
     high_level_input,
     sample_segment_transitions,
     segments_begun,
-    subgoal_placement,
 )
 from dtd.envs.goals import GoalFunctions
 
@@ -251,97 +249,20 @@ class DotToDotAgent:
         return self.high.head.quaternion
 
     def episode_metrics(self, episodes: Episodes) -> dict[str, float]:
-        """How the sub-goals of these episodes went: reached at their segment's end, how far
-        they lay from the start and from the goal, and where along the way (progress along
-        the start-to-goal line and distance off it, over episodes whose goal is not met at
-        their start; NaN where every goal is). Intermediate sub-goals only, of the segments an
-        episode began; reached is NaN where the task's reward does not tell. For goals with a
-        rotation, distances are of the positions, ``*_angle_*`` the rotations' angles in
-        degrees, and the way is the rotation's (off it in degrees)."""
-        starts = self.bounds[:-2]
-        ends = np.minimum(self.bounds[1:-1][None, :], episodes.length[:, None])  # (B, N-1)
-        begun = self._intermediate_begun(episodes)
-        subgoals = episodes.step_goal[:, starts]  # (B, N-1, G)
-        reached_goals = np.take_along_axis(episodes.achieved_goal, ends[..., None], axis=1)
-        goal_dim = subgoals.shape[-1]
-        reached = float("nan")
-        if self.goals.reached is not None:
-            verdicts = self.goals.reached(reached_goals.reshape(-1, goal_dim), subgoals.reshape(-1, goal_dim))
-            reached = _mean(verdicts.reshape(begun.shape)[begun])
-        from_start = goal_separation(episodes.achieved_goal[:, :1], subgoals, self.quaternion)
-        from_goal = goal_separation(episodes.desired_goal[:, None], subgoals, self.quaternion)
-        away = self._goal_away(episodes)
-        progress, off_line = self._placement(episodes, away)
-        metrics = {
-            "subgoal_reached": reached,
-            "subgoal_from_start": _mean(from_start["distance"][begun]),
-            "subgoal_from_goal": _mean(from_goal["distance"][begun]),
-        }
-        if "angle" in from_start:
-            metrics["subgoal_angle_from_start"] = _mean(from_start["angle"][begun])
-            metrics["subgoal_angle_from_goal"] = _mean(from_goal["angle"][begun])
-        metrics["subgoal_progress"] = _mean(progress[begun[away]])
-        metrics["subgoal_off_line"] = _mean(off_line[begun[away]])
-        return metrics
-
-    def _intermediate_begun(self, episodes: Episodes) -> np.ndarray:
-        """(B, N-1) whether each episode began each intermediate segment."""
-        begun = segments_begun(self.bounds, episodes.length)
-        return np.arange(self.segments - 1)[None, :] < begun[:, None]
+        """How the sub-goals of these episodes went (:func:`subgoal_report.subgoal_metrics`)."""
+        return subgoal_report.subgoal_metrics(episodes, self.bounds, self.goals.reached, self.quaternion)
 
     def placement_by_distance(self, episodes: Episodes, groups: int = 3) -> list[dict[str, Any]]:
-        """Where the intermediate sub-goals lay along the way, for ``groups`` groups of
-        episodes of equal size by the distance from the start to the goal (nearest first;
-        episodes whose goal is met at their start left out): per group its distance range,
-        episodes, success, and per sub-goal the mean progress along the start-to-goal line
-        (0 start, 1 goal) and mean distance off it (over the episodes that began its segment)."""
-        away = self._goal_away(episodes)
-        separation = goal_separation(episodes.achieved_goal[:, 0], episodes.desired_goal, self.quaternion)
-        separation_key = "goal_angle" if "angle" in separation else "goal_distance"
-        distance = separation.get("angle", separation["distance"])[away]
-        progress, off_line = self._placement(episodes, away)
-        begun = self._intermediate_begun(episodes)[away]
-        progress, off_line = np.where(begun, progress, np.nan), np.where(begun, off_line, np.nan)
-        order = np.argsort(distance, kind="stable")
-        summary: list[dict[str, Any]] = []
-        if not len(order):
-            return summary
-        for members in np.array_split(order, min(groups, len(order))):
-            summary.append(
-                {
-                    separation_key: [round(float(distance[members][i]), 4) for i in (0, -1)],
-                    "episodes": len(members),
-                    "success": float(np.mean(episodes.success[away][members])),
-                    "progress": [round(float(v), 3) for v in _column_means(progress[members])],
-                    "off_line": [round(float(v), 4) for v in _column_means(off_line[members])],
-                }
-            )
-        return summary
-
-    def _goal_away(self, episodes: Episodes) -> np.ndarray:
-        """(B,) whether an episode's goal is not already met at its start (every episode where
-        the task's reward does not tell)."""
-        if self.goals.reached is None:
-            return np.ones(episodes.count, dtype=bool)
-        return ~self.goals.reached(episodes.achieved_goal[:, 0], episodes.desired_goal)
-
-    def _placement(self, episodes: Episodes, away: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:func:`subgoal_placement` of the intermediate sub-goals, over the episodes ``away``
-        (those whose goal is not met at their start): (B', N-1) each."""
-        return subgoal_placement(
-            episodes.achieved_goal[away, 0],
-            episodes.step_goal[away][:, self.bounds[:-2]],
-            episodes.desired_goal[away],
-            self.quaternion,
+        """Where the sub-goals lay along the way per group of goal distances
+        (:func:`subgoal_report.placement_by_distance`)."""
+        return subgoal_report.placement_by_distance(
+            episodes, self.bounds, self.goals.reached, self.quaternion, groups
         )
 
     def plan(self, episodes: Episodes) -> list[dict[str, Any]]:
         """Per episode: the start, each segment's sub-goal, where the segment ended and whether
         it reached the sub-goal, the goal."""
-        return [
-            episode_plan(episodes, index, self.bounds, self.goals.reached, self.quaternion)
-            for index in range(episodes.count)
-        ]
+        return subgoal_report.plans(episodes, self.bounds, self.goals.reached, self.quaternion)
 
     def state_dict(self, include_replay: bool = True) -> dict[str, Any]:
         state: dict[str, Any] = {"low": self.low.state_dict(), "high": self.high.state_dict()}
@@ -376,17 +297,3 @@ class DotToDotAgent:
         self.high.load_state_dict(state["high"])
         if "buffer" in state:
             self.buffer.load_state_dict(state["buffer"])
-
-
-def _mean(values: np.ndarray) -> float:
-    """The mean of ``values`` (NaN for none)."""
-    return float(np.mean(values)) if values.size else float("nan")
-
-
-def _column_means(values: np.ndarray) -> np.ndarray:
-    """Each column's mean over its rows that are not NaN (NaN where none is)."""
-    if not np.isnan(values).any():
-        return np.mean(values, axis=0)
-    counts = np.sum(~np.isnan(values), axis=0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(counts > 0, np.nansum(values, axis=0) / np.maximum(counts, 1), np.nan)
