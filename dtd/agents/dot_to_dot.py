@@ -12,7 +12,7 @@ import numpy as np
 from dtd.agents import subgoal_report
 from dtd.agents.buffer import EpisodeBuffer
 from dtd.agents.exploration import ActionNoise
-from dtd.agents.her import sample_transitions
+from dtd.agents.her import HindsightSampling
 from dtd.agents.interface import mean_metrics
 from dtd.agents.learner import GoalLearner
 from dtd.agents.networks import SubgoalHead
@@ -76,15 +76,12 @@ class DotToDotAgent:
         bounds: np.ndarray,
         action_noise: ActionNoise,
         exploration: SubgoalExploration,
-        low_relabel_prob: float,
-        low_window_end: np.ndarray | None,
+        low_sampling: HindsightSampling,
         high_relabel_prob: float,
         hindsight_action_prob: float,
         high_updates: int,
-        low_past_share: float = 0.0,
         high_observed_gamma: float | None = None,
         high_actor_all_segments: bool = True,
-        low_n_step: int = 1,
     ) -> None:
         if not isinstance(high.head, SubgoalHead):
             raise TypeError("the high level's learner must propose sub-goals (a SubgoalHead)")
@@ -97,10 +94,8 @@ class DotToDotAgent:
         self.segment_starts = {int(start): n for n, start in enumerate(bounds[:-1])}
         self.action_noise = action_noise
         self.exploration = exploration
-        self.low_relabel_prob = low_relabel_prob
-        self.low_window_end = low_window_end
-        self.low_past_share = low_past_share
-        self.low_n_step = low_n_step
+        self.low_sampling = low_sampling
+        """How the low level draws its transitions: HER's, its relabelled goals within a window."""
         self.high_relabel_prob = high_relabel_prob
         self.hindsight_action_prob = hindsight_action_prob
         self.high_updates = high_updates
@@ -190,20 +185,6 @@ class DotToDotAgent:
         action = self.low.act(obs, goal, rng if explore else None)
         return self.action_noise(action, rng) if explore else action
 
-    def _low_batch(self, episodes: Episodes, size: int, rng: np.random.Generator) -> Batch:
-        return sample_transitions(
-            episodes,
-            size,
-            rng,
-            self.low_relabel_prob,
-            self.goals.reward,
-            self.low_window_end,
-            self.low_past_share,
-            self.low_n_step,
-            self.low.gamma,
-            self.goals.terminal,
-        )
-
     def _high_batch(self, episodes: Episodes, size: int, rng: np.random.Generator) -> Batch:
         batch = sample_segment_transitions(
             episodes,
@@ -221,7 +202,7 @@ class DotToDotAgent:
     def store(self, episodes: Episodes, rng: np.random.Generator) -> None:
         self.buffer.add(episodes)
         # Each level normalises with the goals it will be trained on, relabelled ones included.
-        low = self._low_batch(episodes, int(np.sum(episodes.length)), rng)
+        low = self.low_sampling.sample(episodes, int(np.sum(episodes.length)), rng)
         self.low.update_normalizers(low.obs, low.goal)
         high = self._high_batch(episodes, int(np.sum(segments_begun(self.bounds, episodes.length))), rng)
         self.high.update_normalizers(high.obs, high.goal)
@@ -232,7 +213,9 @@ class DotToDotAgent:
         stored = self.buffer.stored()
         low_metrics, high_metrics = [], []
         for i in range(updates):
-            low_metrics.append(self.low.update(self._low_batch(stored, self.low.config.batch_size, rng)))
+            low_metrics.append(
+                self.low.update(self.low_sampling.sample(stored, self.low.config.batch_size, rng))
+            )
             for _ in range((i + 1) * self.high_updates // updates - i * self.high_updates // updates):
                 batch = self._high_batch(stored, self.high.config.batch_size, rng)
                 high_metrics.append(self.high.update(batch))

@@ -8,15 +8,16 @@ import numpy as np
 
 from dtd.agents.buffer import EpisodeBuffer
 from dtd.agents.exploration import ActionNoise
-from dtd.agents.her import GoalStrategy, relabel_probability, sample_transitions
+from dtd.agents.her import HindsightSampling
 from dtd.agents.interface import mean_metrics
 from dtd.agents.learner import GoalLearner
-from dtd.agents.records import Batch, Episodes
+from dtd.agents.records import Episodes
 from dtd.envs.goals import GoalFunctions
 
 
 class GoalConditionedAgent:
-    """DDPG (``GoalStrategy.none``) or DDPG + HER (``GoalStrategy.future``) toward the task's goal."""
+    """DDPG (its sampling relabels no goal) or DDPG + HER (goals relabelled as HER does) toward
+    the task's goal."""
 
     def __init__(
         self,
@@ -24,20 +25,15 @@ class GoalConditionedAgent:
         buffer: EpisodeBuffer,
         goals: GoalFunctions,
         noise: ActionNoise,
-        strategy: GoalStrategy,
-        replay_k: int,
-        past_share: float = 0.0,
-        n_step: int = 1,
+        sampling: HindsightSampling,
     ) -> None:
         self.learner = learner
         self.buffer = buffer
         self.goals = goals
         """The task's reward and where it ends an episode for a goal."""
         self.noise = noise
-        self.relabel_prob = relabel_probability(strategy, replay_k)
-        self.past_share = past_share
-        self.n_step = n_step
-        """Rewards summed per sampled transition before its value is bootstrapped."""
+        self.sampling = sampling
+        """How transitions are drawn from replay (no relabelling for DDPG, HER's for HER)."""
 
     def step_goal(
         self,
@@ -57,28 +53,17 @@ class GoalConditionedAgent:
     def store(self, episodes: Episodes, rng: np.random.Generator) -> None:
         self.buffer.add(episodes)
         # Normalise with the goals the learner will be trained on, relabelled ones included.
-        sample = self._batch(episodes, int(np.sum(episodes.length)), rng)
+        sample = self.sampling.sample(episodes, int(np.sum(episodes.length)), rng)
         self.learner.update_normalizers(sample.obs, sample.goal)
 
     def train(self, updates: int, rng: np.random.Generator) -> dict[str, float]:
         stored = self.buffer.stored()
         size = self.learner.config.batch_size
-        metrics = mean_metrics(self.learner.update(self._batch(stored, size, rng)) for _ in range(updates))
+        metrics = mean_metrics(
+            self.learner.update(self.sampling.sample(stored, size, rng)) for _ in range(updates)
+        )
         self.learner.update_target()
         return metrics
-
-    def _batch(self, episodes: Episodes, size: int, rng: np.random.Generator) -> Batch:
-        return sample_transitions(
-            episodes,
-            size,
-            rng,
-            self.relabel_prob,
-            self.goals.reward,
-            past_share=self.past_share,
-            n_step=self.n_step,
-            gamma=self.learner.gamma,
-            terminal_fn=self.goals.terminal,
-        )
 
     def planner(self) -> None:
         """None: a flat agent sets itself no sub-goals."""

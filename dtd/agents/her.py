@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 
 import numpy as np
@@ -153,3 +154,33 @@ def sample_transitions(
         terminal=terminal,
         discount=discount,
     )
+
+
+@dataclasses.dataclass(frozen=True)
+class HindsightSampling:
+    """How one level draws its training transitions from stored episodes
+    (:func:`sample_transitions` with these settings): the share of relabelled goals, the task's
+    reward and end of episodes, and the returns' steps and discount (the learner's)."""
+
+    relabel_prob: float
+    reward_fn: RewardFn
+    gamma: float
+    terminal_fn: GoalTest | None = None
+    n_step: int = 1
+    past_share: float = 0.0
+    window_end: np.ndarray | None = None
+    """How far ahead a relabelled goal may come from (None: the episode's end)."""
+
+    def sample(self, episodes: Episodes, batch_size: int, rng: np.random.Generator) -> Batch:
+        return sample_transitions(
+            episodes,
+            batch_size,
+            rng,
+            self.relabel_prob,
+            self.reward_fn,
+            self.window_end,
+            self.past_share,
+            self.n_step,
+            self.gamma,
+            self.terminal_fn,
+        )

@@ -17,7 +17,7 @@ from dtd.agents.collective import ALONE, Collective
 from dtd.agents.dot_to_dot import DotToDotAgent, HandOverSchedule, SubgoalExploration
 from dtd.agents.exploration import ActionNoise
 from dtd.agents.flat import GoalConditionedAgent
-from dtd.agents.her import GoalStrategy, relabel_probability
+from dtd.agents.her import GoalStrategy, HindsightSampling, relabel_probability
 from dtd.agents.interface import Agent
 from dtd.agents.learners import make_learner
 from dtd.agents.networks import BoxActionHead, SubgoalHead
@@ -77,9 +77,15 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
     goals = goal_functions(env, spec)
     if config.algo is not Algo.dtd:
         strategy = GoalStrategy.future if config.algo is Algo.her else GoalStrategy.none
-        return GoalConditionedAgent(
-            low, buffer, goals, noise, strategy, config.replay_k, config.past_goal_share, config.n_step
+        sampling = HindsightSampling(
+            relabel_probability(strategy, config.replay_k),
+            goals.reward,
+            low.gamma,
+            goals.terminal,
+            config.n_step,
+            config.past_goal_share,
         )
+        return GoalConditionedAgent(low, buffer, goals, noise, sampling)
 
     if config.segments > spec.horizon:
         raise ConfigError(f"--segments must be at most the horizon ({spec.horizon}), got {config.segments}")
@@ -124,15 +130,20 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
         exploration=SubgoalExploration(
             schedule, config.subgoal_sigma, config.subgoal_noise, math.radians(config.subgoal_rotation_angle)
         ),
-        low_relabel_prob=relabel_probability(GoalStrategy.future, config.replay_k),
-        low_window_end=window,
-        low_past_share=config.past_goal_share,
+        low_sampling=HindsightSampling(
+            relabel_probability(GoalStrategy.future, config.replay_k),
+            goals.reward,
+            low.gamma,
+            goals.terminal,
+            config.n_step,
+            config.past_goal_share,
+            window,
+        ),
         high_relabel_prob=relabel_probability(GoalStrategy.future, config.high_replay_k),
         hindsight_action_prob=config.hindsight_action_prob,
         high_updates=config.high_updates_per_cycle,
         high_observed_gamma=high_gamma if config.high_target is HighTarget.observed else None,
         high_actor_all_segments=config.high_actor_last_segment,
-        low_n_step=config.n_step,
     )
 
 

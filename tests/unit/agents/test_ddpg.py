@@ -11,7 +11,7 @@ from dtd.agents.buffer import EpisodeBuffer
 from dtd.agents.ddpg import DDPGLearner
 from dtd.agents.exploration import ActionNoise
 from dtd.agents.flat import GoalConditionedAgent
-from dtd.agents.her import GoalStrategy
+from dtd.agents.her import GoalStrategy, HindsightSampling, relabel_probability
 from dtd.agents.networks import BoxActionHead
 from dtd.agents.records import Batch, Episodes
 from dtd.config import LearnerConfig
@@ -151,9 +151,9 @@ def test_agent_checkpoint_round_trip_gives_the_same_actions(tmp_path, strategy):
         learner = make_learner(seed=seed)
         buffer = EpisodeBuffer(10, T, OBS, GOAL, ACT)
         noise = ActionNoise(0.2, 0.3, 2.0)
-        return GoalConditionedAgent(
-            learner, buffer, sparse_goals(lambda a, g: -np.ones(len(a), np.float32)), noise, strategy, 4
-        )
+        goals = sparse_goals(lambda a, g: -np.ones(len(a), np.float32))
+        sampling = HindsightSampling(relabel_probability(strategy, 4), goals.reward, learner.gamma)
+        return GoalConditionedAgent(learner, buffer, goals, noise, sampling)
 
     trained = agent(seed=0)
     trained.store(random_episodes(rng), rng)

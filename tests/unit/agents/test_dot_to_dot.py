@@ -11,6 +11,7 @@ from dtd.agents.buffer import EpisodeBuffer
 from dtd.agents.ddpg import DDPGLearner
 from dtd.agents.dot_to_dot import DotToDotAgent, HandOverSchedule, SubgoalExploration
 from dtd.agents.exploration import ActionNoise
+from dtd.agents.her import HindsightSampling
 from dtd.agents.networks import BoxActionHead, SubgoalHead
 from dtd.agents.records import Episodes
 from dtd.agents.rotations import angle_between, from_rotation_vector
@@ -198,16 +199,16 @@ def make_agent(seed: int = 0, eps: float = 1.0, high_updates: int = 4, segments:
     head = SubgoalHead(0.3, (-1.0,) * GOAL, (60.0,) * GOAL, None)
     high = DDPGLearner(OBS + GOAL, GOAL, GOAL, head, config, 0.5, (-1.0, 0.0))
     bounds = segment_bounds(T, segments)
+    goals = sparse_goals(reached_reward)
     return DotToDotAgent(
         low=low,
         high=high,
         buffer=EpisodeBuffer(20, T, OBS, GOAL, ACT),
-        goals=sparse_goals(reached_reward),
+        goals=goals,
         bounds=bounds,
         action_noise=ActionNoise(0.2, 0.3, 1.0),
         exploration=SubgoalExploration(HandOverSchedule(eps, eps, 0, 1), sigma=0.1, noise=0.1),
-        low_relabel_prob=0.8,
-        low_window_end=segment_window_end(bounds),
+        low_sampling=HindsightSampling(0.8, goals.reward, low.gamma, window_end=segment_window_end(bounds)),
         high_relabel_prob=0.8,
         hindsight_action_prob=0.0,
         high_updates=high_updates,
@@ -377,8 +378,7 @@ def make_pose_agent(rotation_angle: float) -> DotToDotAgent:
         bounds=segment_bounds(T, 2),
         action_noise=ActionNoise(0.2, 0.3, 1.0),
         exploration=SubgoalExploration(HandOverSchedule(1.0, 1.0, 0, 1), 0.1, 0.1, rotation_angle),
-        low_relabel_prob=0.8,
-        low_window_end=None,
+        low_sampling=HindsightSampling(0.8, within_a_tenth, low.gamma),
         high_relabel_prob=0.8,
         hindsight_action_prob=0.0,
         high_updates=1,
