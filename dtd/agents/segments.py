@@ -8,9 +8,10 @@ segment, the last segment's being the task's goal.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
+import torch
 
 from dtd.agents.her import future_indices, sample_steps, window_rewards
 from dtd.agents.records import Batch, Episodes
@@ -58,8 +59,14 @@ def segments_begun(bounds: np.ndarray, length: np.ndarray) -> np.ndarray:
     return np.searchsorted(bounds[:-1], length, side="left")
 
 
-def high_level_input(obs: np.ndarray, achieved_goal: np.ndarray) -> np.ndarray:
-    """The high level observes o || ag: it places sub-goals relative to the achieved goal."""
+Layout = TypeVar("Layout", np.ndarray, torch.Tensor)
+
+
+def high_level_input(obs: Layout, achieved_goal: Layout) -> Layout:
+    """The high level observes o || ag: it places sub-goals relative to the achieved goal. The
+    one definition of that layout, for arrays (acting, replay) and tensors (the export) alike."""
+    if isinstance(obs, torch.Tensor):
+        return torch.cat([obs, achieved_goal], dim=-1)
     return np.concatenate([obs, achieved_goal], axis=-1)
 
 

@@ -12,6 +12,7 @@ import torch
 from torch import nn
 
 from dtd.agents.learner import GoalLearner
+from dtd.agents.segments import high_level_input
 
 
 class _LearnerPath(nn.Module):
@@ -30,11 +31,6 @@ class PolicyPath(_LearnerPath):
         return self.learner.action_of(observation, goal)
 
 
-def high_level_tensor(observation: torch.Tensor, achieved_goal: torch.Tensor) -> torch.Tensor:
-    """What dtd's high level observes, o || ag (:func:`dtd.agents.segments.high_level_input`)."""
-    return torch.cat([observation, achieved_goal], dim=-1)
-
-
 class SubgoalPath(_LearnerPath):
     """(observation, achieved goal, goal) -> sub-goal: dtd's high level, its sub-goals kept in
     the goal box (with a unit quaternion on the Hand tasks)."""
@@ -42,7 +38,7 @@ class SubgoalPath(_LearnerPath):
     def forward(
         self, observation: torch.Tensor, achieved_goal: torch.Tensor, goal: torch.Tensor
     ) -> torch.Tensor:
-        return self.learner.action_of(high_level_tensor(observation, achieved_goal), goal)
+        return self.learner.action_of(high_level_input(observation, achieved_goal), goal)
 
 
 class SubgoalValuePath(_LearnerPath):
@@ -56,4 +52,4 @@ class SubgoalValuePath(_LearnerPath):
         goal: torch.Tensor,
         subgoal: torch.Tensor,
     ) -> torch.Tensor:
-        return self.learner.value_of(high_level_tensor(observation, achieved_goal), goal, subgoal)
+        return self.learner.value_of(high_level_input(observation, achieved_goal), goal, subgoal)
