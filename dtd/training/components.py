@@ -75,16 +75,17 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
     noise_eps = 0.0 if low.stochastic else config.noise_eps
     noise = ActionNoise(noise_eps, config.random_eps, spec.action_max)
     goals = goal_functions(env, spec)
+    # DDPG trains on the goals its episodes had; HER and dtd's low level relabel them.
+    strategy = GoalStrategy.none if config.algo is Algo.ddpg else GoalStrategy.future
+    sampling = HindsightSampling(
+        relabel_probability(strategy, config.replay_k),
+        goals.reward,
+        low.gamma,
+        goals.terminal,
+        config.n_step,
+        config.past_goal_share,
+    )
     if config.algo is not Algo.dtd:
-        strategy = GoalStrategy.future if config.algo is Algo.her else GoalStrategy.none
-        sampling = HindsightSampling(
-            relabel_probability(strategy, config.replay_k),
-            goals.reward,
-            low.gamma,
-            goals.terminal,
-            config.n_step,
-            config.past_goal_share,
-        )
         return GoalConditionedAgent(low, buffer, goals, noise, sampling)
 
     if config.segments > spec.horizon:
@@ -130,15 +131,7 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
         exploration=SubgoalExploration(
             schedule, config.subgoal_sigma, config.subgoal_noise, math.radians(config.subgoal_rotation_angle)
         ),
-        low_sampling=HindsightSampling(
-            relabel_probability(GoalStrategy.future, config.replay_k),
-            goals.reward,
-            low.gamma,
-            goals.terminal,
-            config.n_step,
-            config.past_goal_share,
-            window,
-        ),
+        low_sampling=dataclasses.replace(sampling, window_end=window),
         high_relabel_prob=relabel_probability(GoalStrategy.future, config.high_replay_k),
         hindsight_action_prob=config.hindsight_action_prob,
         high_updates=config.high_updates_per_cycle,

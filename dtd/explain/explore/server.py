@@ -1,4 +1,4 @@
-"""The web side of ``dtd explore``: a FastAPI app over one :class:`Explorer`, served by uvicorn.
+"""The web side of ``dtd explore``: a FastAPI app over a run's :class:`Explorer`, served by uvicorn.
 
 Episodes and value maps each have an :class:`Explorer` of their own on a worker thread of its
 own (an Explorer is not thread-safe, and an EGL context belongs to the thread that made it), so a
