@@ -63,8 +63,8 @@ def serving(tmp_path: Path) -> Iterator[tuple[int, HeldExplorer, dict]]:
     server = uvicorn.Server(uvicorn.Config(app, log_level="warning", access_log=False))
     thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
     thread.start()
-    while not server.started:
-        time.sleep(0.01)
+    wait_until(lambda: server.started or not thread.is_alive(), "the server did not start")
+    assert server.started, "the server stopped before it listened"
     try:
         yield sock.getsockname()[1], explorer, app.state.gates
     finally:
