@@ -22,7 +22,7 @@ import numpy as np
 
 from dtd.agents.buffer import slots_oldest_first
 from dtd.errors import CheckpointError
-from dtd.training.checkpoint import load_checkpoint
+from dtd.training.checkpoint import Checkpoint
 from dtd.training.run_dir import RunDir
 
 OBJECT_TASKS = ("FetchPush", "FetchSlide", "FetchPickAndPlace")
@@ -35,11 +35,11 @@ MOVED = (0.01, 0.05)
 def episode_motion(run: Path) -> tuple[int, np.ndarray, np.ndarray]:
     """Index of the first stored episode, per-episode largest displacement of the object and
     closest approach of the gripper, in the order the episodes were collected."""
-    state = load_checkpoint(RunDir(run).latest)
-    env_id = state["env_id"]
+    checkpoint = Checkpoint.read(RunDir(run).latest)
+    env_id = checkpoint.env_id
     if not env_id.startswith(OBJECT_TASKS):
         raise SystemExit(f"{run}: {env_id} is not one of the Fetch object tasks ({', '.join(OBJECT_TASKS)})")
-    buffer = state["agent"]["buffer"]
+    buffer = checkpoint.agent["buffer"]
     size, added = int(buffer["size"]), int(buffer["episodes_added"])
     achieved = buffer["data"]["achieved_goal"].numpy()[:size]
     gripper = buffer["data"]["obs"].numpy()[:size, :, 0:3]

@@ -28,17 +28,15 @@ import torch
 
 from dtd.agents.dot_to_dot import DotToDotAgent
 from dtd.agents.segments import sample_segment_transitions
-from dtd.training.components import close_all
 from dtd.training.trained_run import load_run
 
 
 def figures(run_dir: Path, episodes: int, samples: int) -> dict[str, dict[str, float]]:
-    loaded = load_run(run_dir, "latest")
-    agent = loaded.components.agent
-    close_all(loaded.components)
+    with load_run(run_dir, "latest") as loaded:
+        agent = loaded.agent
     if not isinstance(agent, DotToDotAgent) or agent.segments < 2:
         raise SystemExit(f"{run_dir}: needs a dtd run with two segments or more")
-    agent.buffer.load_state_dict(loaded.snapshot["agent"]["buffer"])
+    agent.buffer.load_state_dict(loaded.checkpoint.agent["buffer"])
     stored = agent.buffer.stored()
     newest = agent.buffer.oldest_first()[-episodes:]
     recent = type(stored)(*(part[newest] for part in stored))

@@ -24,7 +24,6 @@ import numpy as np
 
 from dtd.agents.dot_to_dot import DotToDotAgent
 from dtd.agents.segments import subgoal_placement
-from dtd.training.components import close_all
 from dtd.training.trained_run import load_run
 
 
@@ -42,8 +41,8 @@ def candidate_grid(
 
 def compare(run_dir: Path, episodes: int, points: int, checkpoint: str) -> dict[str, float]:
     loaded = load_run(run_dir, checkpoint)
-    agent, env = loaded.components.agent, loaded.components.eval_envs[0]
-    if not isinstance(agent, DotToDotAgent) or loaded.components.spec.quaternion is not None:
+    agent, env = loaded.agent, loaded.envs[0]
+    if not isinstance(agent, DotToDotAgent) or loaded.spec.quaternion is not None:
         raise SystemExit(f"{run_dir}: needs a dtd run on a task whose goals are positions")
     head = agent.high.head
     low, high = head.low.numpy().astype(np.float64), head.high.numpy().astype(np.float64)
@@ -62,7 +61,7 @@ def compare(run_dir: Path, episodes: int, points: int, checkpoint: str) -> dict[
         progress, _ = subgoal_placement(start[None], np.stack([chosen, best])[None], goal[None])
         actor_progress.append(progress[0, 0])
         best_progress.append(progress[0, 1])
-    close_all(loaded.components)
+    loaded.close()
     return {
         "gap_median": float(np.median(gaps)),
         "gap_p90": float(np.percentile(gaps, 90)),

@@ -35,7 +35,7 @@ _PUBLIC = {
     "preset_config": "dtd.config",
     "with_settings": "dtd.config",
     "DtdError": "dtd.errors",
-    "TrainState": "dtd.training.trainer",
+    "TrainState": "dtd.training.checkpoint",
     "train": "dtd.training.lifecycle",
     "train_for_steps": "dtd.training.lifecycle",
     "LoadedRun": "dtd.training.trained_run",
@@ -64,9 +64,9 @@ __all__ = [
 if TYPE_CHECKING:
     from dtd.config import Algo, LearnerConfig, Preset, TrainConfig, preset_config, with_settings
     from dtd.errors import DtdError
+    from dtd.training.checkpoint import TrainState
     from dtd.training.lifecycle import train, train_for_steps
     from dtd.training.trained_run import LoadedRun, evaluate_run, load_agent, load_run
-    from dtd.training.trainer import TrainState
 
 
 def __getattr__(name: str) -> Any:

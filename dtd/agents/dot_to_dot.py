@@ -120,6 +120,9 @@ class DotToDotAgent:
         """Itself: what explaining and exporting ask of a high level it answers."""
         return self
 
+    def motor_learner(self) -> GoalLearner:
+        return self.low
+
     def propose_subgoals(
         self, obs: np.ndarray, achieved_goal: np.ndarray, desired_goal: np.ndarray
     ) -> np.ndarray:

@@ -69,6 +69,9 @@ class GoalConditionedAgent:
         """None: a flat agent sets itself no sub-goals."""
         return None
 
+    def motor_learner(self) -> GoalLearner:
+        return self.learner
+
     def episode_metrics(self, episodes: Episodes) -> dict[str, float]:
         return {}
 

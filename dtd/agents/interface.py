@@ -8,6 +8,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from dtd.agents.learner import GoalLearner
 from dtd.agents.records import Episodes
 
 
@@ -17,6 +18,8 @@ class Planner(Protocol):
 
     bounds: np.ndarray
     """Steps at which the segments begin, and the horizon last."""
+    high: GoalLearner
+    """The high level's learner, whose actions are sub-goals (the export traces its paths)."""
 
     def propose_subgoals(
         self, obs: np.ndarray, achieved_goal: np.ndarray, desired_goal: np.ndarray
@@ -44,6 +47,11 @@ class Agent(Protocol):
 
     def planner(self) -> Planner | None:
         """Its high level, for an agent that sets itself sub-goals; None for a flat agent."""
+        ...
+
+    def motor_learner(self) -> GoalLearner:
+        """The learner whose policy chooses the motor commands (a flat agent's only one; the
+        low level of an agent that sets itself sub-goals)."""
         ...
 
     def step_goal(

@@ -210,7 +210,6 @@ def run_heatmaps(
     (x, y) is mapped over its goal box, from its own start and goal after a reset with
     ``seed``."""
     from dtd.training.atomic import ensure_writable
-    from dtd.training.components import close_all
     from dtd.training.run_dir import RunDir, read_config
     from dtd.training.trained_run import load_run
 
@@ -225,11 +224,9 @@ def run_heatmaps(
     rows: list[tuple[str, list[Heatmap]]] = []
     table = None
     for name in checkpoints:
-        loaded = load_run(Path(run_dir), name)
-        try:
-            env, agent = loaded.components.eval_envs[0], loaded.components.agent.planner()
+        with load_run(Path(run_dir), name) as loaded:
+            env, agent, spec = loaded.envs[0], loaded.agent.planner(), loaded.spec
             assert agent is not None  # a run whose agent sets sub-goals (checked above)
-            spec = loaded.components.spec
             if spec.goal_dim == 2 and spec.quaternion is None:
                 if start is not None or goal is not None or heights is not None:
                     raise ConfigError(
@@ -250,9 +247,7 @@ def run_heatmaps(
                 placed = (start or DEFAULT_START, goal or DEFAULT_GOAL)
                 observation = place_block_and_goal(env, *placed)
                 slices = [value_slice(agent, observation, table, z, resolution) for z in levels]
-            rows.append((f"after epoch {loaded.snapshot['state']['epoch']} ({name})", slices))
-        finally:
-            close_all(loaded.components)
+            rows.append((f"after epoch {loaded.checkpoint.epoch} ({name})", slices))
     assert table is not None
     what = "start" if rows and rows[0][1][0].z is None else "block"
     title = f"{config.env}: the high level's value of each sub-goal\nfor the {what} (black) and goal (red)"

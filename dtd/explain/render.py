@@ -324,7 +324,6 @@ def render_run(
 
     from dtd.errors import ConfigError
     from dtd.training.atomic import ensure_writable, write_text_atomic
-    from dtd.training.components import close_all
     from dtd.training.trained_run import load_run
 
     if episodes < 1:
@@ -333,8 +332,7 @@ def render_run(
         raise ConfigError(f"--width and --height must be at least 16, got {width}x{height}")
     ensure_writable(Path(out), "rendered episodes")
     loaded = load_run(Path(run_dir), checkpoint, seed, envs=1)
-    components = loaded.components
-    env, agent, spec = components.eval_envs[0], components.agent, components.spec
+    env, agent, spec = loaded.envs[0], loaded.agent, loaded.spec
     planner = agent.planner()
     bounds = planner.bounds if planner is not None else None
     plan_of = planner.plan if planner is not None else None
@@ -342,10 +340,10 @@ def render_run(
     written = []
     try:
         for number in range(1, episodes + 1):
-            rendered = render_episode(env, agent, spec, renderer, components.rng, bounds, plan_of)
+            rendered = render_episode(env, agent, spec, renderer, loaded.rng, bounds, plan_of)
             name = f"episode-{number}"
             title = (
-                f"{loaded.config.algo.value} on {spec.env_id}, epoch {loaded.snapshot['state']['epoch']}, "
+                f"{loaded.config.algo.value} on {spec.env_id}, epoch {loaded.checkpoint.epoch}, "
                 f"episode {number}: "
                 f"{marker_legend(spec.quaternion is not None, bounds is not None, is_planar(spec))}"
             )
@@ -358,7 +356,7 @@ def render_run(
             )
     finally:
         renderer.close()
-        close_all(components)
+        loaded.close()
     plans = [{"episode": n, **files.plan} for n, files in enumerate(written, start=1)]
     write_text_atomic(Path(out) / "plans.json", json.dumps(plans, indent=1) + "\n")
     return written

@@ -21,16 +21,14 @@ import numpy as np
 import torch
 from torch import nn
 
-from dtd.agents.dot_to_dot import DotToDotAgent
-from dtd.agents.flat import GoalConditionedAgent
+from dtd.agents.interface import Agent
 from dtd.envs.make import env_kwargs
 from dtd.envs.spec import EnvSpec
 from dtd.errors import ConfigError, DtdError
 from dtd.export.paths import PolicyPath, SubgoalPath, SubgoalValuePath
 from dtd.training.atomic import ensure_writable, write_atomic, write_text_atomic
-from dtd.training.components import close_all
 from dtd.training.run_dir import package_versions
-from dtd.training.trained_run import load_run
+from dtd.training.trained_run import LoadedRun, load_run
 
 OPSET = 17
 """ONNX opset of the exported models (ONNX Runtime 1.14 and newer run it)."""
@@ -73,30 +71,36 @@ def require_onnx() -> None:
             ) from exc
 
 
-def models_of(agent: GoalConditionedAgent | DotToDotAgent, spec: EnvSpec) -> list[ModelFile]:
-    """The models an agent's acting is made of."""
+def models_of(agent: Agent, spec: EnvSpec) -> list[ModelFile]:
+    """The models an agent's acting is made of: its policy, and for an agent that sets itself
+    sub-goals, the high level's sub-goal and value paths with the policy pursuing them."""
     obs, goal = spec.obs_dim, spec.goal_dim
-    if isinstance(agent, DotToDotAgent):
+    policy = PolicyPath(agent.motor_learner())
+    planner = agent.planner()
+    if planner is None:
         return [
             ModelFile(
-                "low_level", "low_level.onnx", {"observation": obs, "subgoal": goal},
-                ("action", spec.action_dim), PolicyPath(agent.low),
-            ),
-            ModelFile(
-                "high_level", "high_level.onnx", {"observation": obs, "achieved_goal": goal, "goal": goal},
-                ("subgoal", goal), SubgoalPath(agent.high),
-            ),
-            ModelFile(
-                "high_level_value", "high_level_value.onnx",
-                {"observation": obs, "achieved_goal": goal, "goal": goal, "subgoal": goal},
-                ("value", 1), SubgoalValuePath(agent.high),
-            ),
-        ]  # fmt: skip
+                "policy",
+                "policy.onnx",
+                {"observation": obs, "goal": goal},
+                ("action", spec.action_dim),
+                policy,
+            )
+        ]
     return [
         ModelFile(
-            "policy", "policy.onnx", {"observation": obs, "goal": goal}, ("action", spec.action_dim),
-            PolicyPath(agent.learner),
-        )
+            "low_level", "low_level.onnx", {"observation": obs, "subgoal": goal},
+            ("action", spec.action_dim), policy,
+        ),
+        ModelFile(
+            "high_level", "high_level.onnx", {"observation": obs, "achieved_goal": goal, "goal": goal},
+            ("subgoal", goal), SubgoalPath(planner.high),
+        ),
+        ModelFile(
+            "high_level_value", "high_level_value.onnx",
+            {"observation": obs, "achieved_goal": goal, "goal": goal, "subgoal": goal},
+            ("value", 1), SubgoalValuePath(planner.high),
+        ),
     ]  # fmt: skip
 
 
@@ -150,10 +154,8 @@ def export_run(run_dir: Path, out: Path, checkpoint: str = "latest", force: bool
         )
     if out.exists() and any(out.iterdir()) and not force:
         raise ConfigError(f"{out} already exists; give --force to replace what is in it, or another --out")
-    loaded = load_run(Path(run_dir), checkpoint)
-    try:
-        agent, spec = loaded.components.agent, loaded.components.spec
-        assert isinstance(agent, GoalConditionedAgent | DotToDotAgent)
+    with load_run(Path(run_dir), checkpoint) as loaded:
+        agent, spec = loaded.agent, loaded.spec
         models = models_of(agent, spec)
         if force and out.is_dir():
             for model in models:
@@ -177,14 +179,12 @@ def export_run(run_dir: Path, out: Path, checkpoint: str = "latest", force: bool
         write_text_atomic(written[-1], json.dumps(policy, indent=1) + "\n")
         written.append(out / "README.md")
         write_text_atomic(written[-1], readme(policy))
-    finally:
-        close_all(loaded.components)
     return Exported(out, written, policy, largest)
 
 
 def describe(
-    loaded: Any,
-    agent: GoalConditionedAgent | DotToDotAgent,
+    loaded: LoadedRun,
+    agent: Agent,
     spec: EnvSpec,
     models: list[ModelFile],
     largest: float,
@@ -193,7 +193,6 @@ def describe(
     versions = package_versions()
     for name in ("onnx", "onnxruntime"):
         versions[name] = metadata.version(name)
-    state = loaded.snapshot["state"]
     policy: dict[str, Any] = {
         "format": FORMAT,
         "env_id": spec.env_id,
@@ -222,15 +221,16 @@ def describe(
         "goal_quaternion": list(spec.quaternion) if spec.quaternion else None,
         "checkpoint": {
             "run": loaded.run.root.name,
-            "path": loaded.run.named(loaded.checkpoint),
-            "epoch": state["epoch"],
-            "env_steps": state["env_steps"],
+            "path": loaded.run.named(loaded.path),
+            "epoch": loaded.checkpoint.epoch,
+            "env_steps": loaded.checkpoint.env_steps,
         },
         "largest_difference_from_torch": largest,
         "versions": versions,
     }
-    if isinstance(agent, DotToDotAgent):
-        bounds = [int(bound) for bound in agent.bounds]
+    planner = agent.planner()
+    if planner is not None:
+        bounds = [int(bound) for bound in planner.bounds]
         policy["segments"] = {
             "bounds": bounds,
             "rule": (

@@ -140,33 +140,37 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
     )
 
 
-def build(
+@dataclasses.dataclass
+class Acting:
+    """An agent on seeded evaluation environments of its task, with no training environments
+    and no collector: what evaluating, rendering, explaining and exporting a run need."""
+
+    spec: EnvSpec
+    agent: Agent
+    envs: list[gym.Env]
+    rng: np.random.Generator
+    """Replay sampling (and anything else the learner draws)."""
+
+    def close(self) -> None:
+        close_envs(self.envs)
+
+
+def build_acting(
     config: TrainConfig,
     eval_seed: int | None = None,
     eval_envs: int | None = None,
-    collection: Collection | None = None,
     worker: int = 0,
     collective: Collective = ALONE,
-) -> Components:
-    """Environments, agent, collector and random generators for ``config``, all seeded from
-    ``config.seed``.
-
-    ``eval_seed`` seeds the evaluation environments apart from training (``dtd eval``);
-    ``collection`` overrides ``config.collector``. Data-parallel ``worker`` k > 0 of a run
-    seeds its environments, exploration and replay sampling apart from worker 0 (whose
-    seeds are a run of its own's) and combines its updates through ``collective``; the
-    networks start the same on every worker.
-    """
+) -> Acting:
+    """The agent ``config`` describes (fresh networks, empty replay) on its evaluation
+    environments, all seeded from ``config.seed`` as :func:`build` seeds them; ``eval_seed``
+    seeds the environments apart from training (``dtd eval``)."""
     config.validate()
     assert config.env is not None
-    collection = collection or config.collector
-    threads = resolved_threads(config.threads)
-    torch.set_num_threads(threads)
+    torch.set_num_threads(resolved_threads(config.threads))
     torch.manual_seed(config.seed)
-    seeds = np.random.SeedSequence(config.seed if worker == 0 else [config.seed, worker])
-    train_seq, eval_seq, rng_seq, explore_seq = seeds.spawn(4)
-    if eval_seed is not None:
-        eval_seq = np.random.SeedSequence([eval_seed, 1])
+    seeds = _run_seeds(config, worker)
+    eval_seq = np.random.SeedSequence([eval_seed, 1]) if eval_seed is not None else seeds.evaluation
     n_eval = eval_envs or min(config.test_episodes, config.episodes_per_cycle)
     evaluation, spec = seeded_envs(config, n_eval, eval_seq)
     if config.buffer_size < spec.horizon:
@@ -174,18 +178,56 @@ def build(
         raise ConfigError(
             f"--buffer-size must hold one episode ({spec.horizon} steps), got {config.buffer_size}"
         )
-    agent = build_agent(config, spec, evaluation[0], collective)
-    exploring_side = functools.partial(_exploring_side, config, train_seq, explore_seq)
     try:
-        if resolved_collection(collection, threads) is Collection.process:
-            collector: Collector = ProcessCollector(exploring_side, agent)
-        else:
-            train, _, _, explore_rng = exploring_side(agent)
-            collector = InlineCollector(train, agent, spec, explore_rng)
+        agent = build_agent(config, spec, evaluation[0], collective)
     except BaseException:
         close_envs(evaluation)
         raise
-    return Components(spec, agent, collector, evaluation, np.random.default_rng(rng_seq))
+    return Acting(spec, agent, evaluation, np.random.default_rng(seeds.replay))
+
+
+def build(
+    config: TrainConfig,
+    collection: Collection | None = None,
+    worker: int = 0,
+    collective: Collective = ALONE,
+) -> Components:
+    """Environments, agent, collector and random generators for ``config``, all seeded from
+    ``config.seed``.
+
+    ``collection`` overrides ``config.collector``. Data-parallel ``worker`` k > 0 of a run
+    seeds its environments, exploration and replay sampling apart from worker 0 (whose
+    seeds are a run of its own's) and combines its updates through ``collective``; the
+    networks start the same on every worker.
+    """
+    acting = build_acting(config, worker=worker, collective=collective)
+    seeds = _run_seeds(config, worker)
+    collection = collection or config.collector
+    exploring_side = functools.partial(_exploring_side, config, seeds.training, seeds.exploration)
+    try:
+        if resolved_collection(collection, resolved_threads(config.threads)) is Collection.process:
+            collector: Collector = ProcessCollector(exploring_side, acting.agent)
+        else:
+            train, _, _, explore_rng = exploring_side(acting.agent)
+            collector = InlineCollector(train, acting.agent, acting.spec, explore_rng)
+    except BaseException:
+        acting.close()
+        raise
+    return Components(acting.spec, acting.agent, collector, acting.envs, acting.rng)
+
+
+@dataclasses.dataclass(frozen=True)
+class _RunSeeds:
+    training: np.random.SeedSequence
+    evaluation: np.random.SeedSequence
+    replay: np.random.SeedSequence
+    exploration: np.random.SeedSequence
+
+
+def _run_seeds(config: TrainConfig, worker: int) -> _RunSeeds:
+    """The seeds of a run's parts, from ``config.seed`` (worker k > 0: apart from worker 0)."""
+    seeds = np.random.SeedSequence(config.seed if worker == 0 else [config.seed, worker])
+    return _RunSeeds(*seeds.spawn(4))
 
 
 def resolved_device(device: Device) -> torch.device:

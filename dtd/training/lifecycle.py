@@ -13,14 +13,14 @@ from dtd.config import Preset, TrainConfig, flat_items, preset_config, with_algo
 from dtd.envs.spec import EnvSpec
 from dtd.errors import CheckpointError, ConfigError, RunDirError, WorkerLost
 from dtd.training.atomic import remove_stale_temporaries
-from dtd.training.checkpoint import FORMAT_VERSION, check_checkpoint, load_checkpoint, restoring
+from dtd.training.checkpoint import Checkpoint, TrainState, restoring
 from dtd.training.components import Components, build, close_all, make_task_envs, resolved_threads
 from dtd.training.launch import launched_workers
 from dtd.training.progress import TrainingProgress
 from dtd.training.recorder import MetricsRecorder
 from dtd.training.run_dir import RunDir, read_config, write_config
 from dtd.training.run_lock import holding
-from dtd.training.trainer import Trainer, TrainState, restore
+from dtd.training.trainer import Trainer, restore
 from dtd.training.workers import SOLO, WorkerGroup, join_group, leave_group
 
 # Settings that may change when a run is resumed; any other must stay as the run began.
@@ -148,28 +148,21 @@ def _resumed(
     if group.writes:
         remove_stale_temporaries(run.root)  # half-written files of the process that was killed
     # A run killed during its first epoch has no checkpoint yet: it starts again.
-    snapshot = load_checkpoint(run.latest) if run.latest.exists() else None
-    if snapshot is not None:
+    latest = Checkpoint.read(run.latest) if run.latest.exists() else None
+    if latest is not None:
         with restoring(run.latest):
-            trained = TrainState(**snapshot["state"])
+            trained = latest.train_state()
         if trained.epoch >= config.epochs:
             return config, None, trained
     components = build(config, worker=group.rank, collective=group.collective)
-    if snapshot is None:
+    if latest is None:
         return config, components, TrainState()
-    path = run.latest
-    if not group.writes:
-        path = run.worker_shard(group.rank, trained.epoch)
-        snapshot = load_checkpoint(path)
+    path = run.latest if group.writes else run.worker_shard(group.rank, trained.epoch)
     try:
-        check_checkpoint(snapshot, config, components.spec, path)
-        if snapshot["format_version"] != FORMAT_VERSION:
-            raise CheckpointError(
-                f"checkpoint {path} was written by an older dtd (format "
-                f"{snapshot['format_version']}); it can be evaluated but not resumed"
-            )
+        checkpoint = latest if group.writes else Checkpoint.read(path)
+        checkpoint.check_fits(config, components.spec, path)
         state = restore(
-            snapshot, components.agent, components.rng, components.collector, components.eval_envs, path
+            checkpoint, components.agent, components.rng, components.collector, components.eval_envs, path
         )
     except CheckpointError:
         close_all(components)

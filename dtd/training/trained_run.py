@@ -9,55 +9,87 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
 from dtd.agents.interface import Agent
-from dtd.config import EVAL_SEED, Collection, Device, TrainConfig
+from dtd.config import EVAL_SEED, Device, TrainConfig
+from dtd.envs.spec import EnvSpec
 from dtd.errors import ConfigError
 from dtd.training.atomic import write_text_atomic
-from dtd.training.checkpoint import check_checkpoint, load_checkpoint, restoring
-from dtd.training.components import Components, build, close_all
+from dtd.training.checkpoint import Checkpoint
+from dtd.training.components import Acting, build_acting
 from dtd.training.rollout import episode_figures, run_many
 from dtd.training.run_dir import CHECKPOINT_NAMES, RunDir, read_config
 
 
 @dataclasses.dataclass
 class LoadedRun:
-    """A trained run brought back: its settings, checkpoint and rebuilt components."""
+    """A trained run brought back: its settings, one checkpoint, and its agent acting on
+    seeded evaluation environments (close them with :meth:`close`, or use it in ``with``)."""
 
     run: RunDir
     config: TrainConfig
-    checkpoint: Path
-    snapshot: dict[str, Any]
-    components: Components
+    path: Path
+    """The checkpoint file it was loaded from."""
+    checkpoint: Checkpoint
+    acting: Acting
+
+    @property
+    def agent(self) -> Agent:
+        return self.acting.agent
+
+    @property
+    def spec(self) -> EnvSpec:
+        return self.acting.spec
+
+    @property
+    def envs(self) -> list[gym.Env]:
+        return self.acting.envs
+
+    @property
+    def rng(self) -> np.random.Generator:
+        return self.acting.rng
+
+    def close(self) -> None:
+        self.acting.close()
+
+    def __enter__(self) -> LoadedRun:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def on_the_cpu(config: TrainConfig) -> TrainConfig:
+    """A run's settings for acting: looking at a trained agent needs no GPU, wherever it was
+    trained."""
+    return dataclasses.replace(config, device=Device.cpu)
 
 
 def load_run(
     run_dir: Path | str, checkpoint: str = "latest", seed: int = EVAL_SEED, envs: int = 1
 ) -> LoadedRun:
-    """Rebuild a run's agent from a checkpoint, with ``envs`` evaluation environments seeded
-    by ``seed``; raises :class:`DtdError` subclasses for missing or foreign files."""
+    """A run's agent restored from a checkpoint (without its replay), on ``envs`` evaluation
+    environments seeded by ``seed``; raises :class:`DtdError` subclasses for missing or
+    foreign files."""
     run = RunDir(Path(run_dir))
     config = read_config(run)
     path = run.checkpoint(checkpoint)
-    snapshot = load_checkpoint(path)
-    # Looking at a trained agent needs no GPU, wherever it was trained.
-    acting = dataclasses.replace(config, device=Device.cpu)
-    components = build(acting, eval_seed=seed, eval_envs=envs, collection=Collection.inline)
+    stored = Checkpoint.read(path)
+    acting = build_acting(on_the_cpu(config), eval_seed=seed, eval_envs=envs)
     try:
-        check_checkpoint(snapshot, config, components.spec, path)
-        with restoring(path):
-            components.agent.load_state_dict({k: v for k, v in snapshot["agent"].items() if k != "buffer"})
+        stored.check_fits(config, acting.spec, path)
+        stored.load_agent(acting.agent, path)
     except BaseException:
-        close_all(components)
+        acting.close()
         raise
-    return LoadedRun(run, config, path, snapshot, components)
+    return LoadedRun(run, config, path, stored, acting)
 
 
 def load_agent(run_dir: Path | str, checkpoint: str = "latest") -> tuple[Agent, gym.Env]:
     """A trained agent and an environment of its task, e.g. to query ``subgoal_values``."""
     loaded = load_run(Path(run_dir), checkpoint)
-    loaded.components.collector.close()
-    return loaded.components.agent, loaded.components.eval_envs[0]
+    return loaded.agent, loaded.envs[0]
 
 
 def evaluate_run(
@@ -76,34 +108,23 @@ def evaluate_run(
     config = read_config(RunDir(Path(run_dir)))
     if show_subgoals and not config.algo.sets_subgoals:
         raise ConfigError(f"--show-subgoals needs a dtd run; {run_dir} is a {config.algo.value} run")
-    loaded = load_run(run_dir, checkpoint, seed, envs=min(episodes, 10))
-    components = loaded.components
-    try:
-        played = run_many(
-            components.eval_envs,
-            components.agent,
-            components.spec,
-            episodes,
-            explore=False,
-            rng=components.rng,
-        )
-    finally:
-        close_all(components)
-    figures = episode_figures(components.agent, played)
+    with load_run(run_dir, checkpoint, seed, envs=min(episodes, 10)) as loaded:
+        played = run_many(loaded.envs, loaded.agent, loaded.spec, episodes, explore=False, rng=loaded.rng)
+    figures = episode_figures(loaded.agent, played)
     result: dict[str, Any] = {
         "run_dir": str(loaded.run.root),
-        "checkpoint": str(loaded.checkpoint),
+        "checkpoint": str(loaded.path),
         "env": config.env,
         "algo": config.algo.value,
-        "epoch": loaded.snapshot["state"]["epoch"],
-        "env_steps": loaded.snapshot["state"]["env_steps"],
+        "epoch": loaded.checkpoint.epoch,
+        "env_steps": loaded.checkpoint.env_steps,
         "episodes": episodes,
         "seed": seed,
         "success_rate": figures.pop("success"),
         "mean_final_distance": figures.pop("final_distance"),
         **figures,
     }
-    planner = components.agent.planner()
+    planner = loaded.agent.planner()
     if planner is not None:
         result["subgoal_placement"] = planner.placement_by_distance(played)
         if show_subgoals:
@@ -133,7 +154,7 @@ def final_evaluation(run_dir: Path | str, episodes: int) -> Path:
     """The run's latest checkpoint evaluated over ``episodes`` episodes and saved, unless an
     evaluation of that epoch over at least as many episodes is saved already."""
     path = saved_evaluation_path(run_dir)
-    epoch = load_checkpoint(RunDir(Path(run_dir)).latest)["state"]["epoch"]
+    epoch = Checkpoint.read(RunDir(Path(run_dir)).latest).epoch
     if path.is_file():
         try:
             saved = json.loads(path.read_text())

@@ -10,7 +10,6 @@ import math
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -19,27 +18,13 @@ import torch
 from dtd.agents.interface import Agent
 from dtd.config import TrainConfig
 from dtd.envs.spec import EnvSpec
-from dtd.training.checkpoint import restoring, save_atomic
+from dtd.training.checkpoint import Checkpoint, TrainState, restoring
 from dtd.training.collector import Collector, env_rng_states, restore_env_rng_states
 from dtd.training.progress import TrainingProgress
 from dtd.training.recorder import MetricsRecorder, Row
 from dtd.training.rollout import concatenate, episode_figures, run_many
 from dtd.training.run_dir import RunDir
 from dtd.training.workers import SOLO, WorkerGroup
-
-
-@dataclasses.dataclass
-class TrainState:
-    """Counters of a run, saved in every checkpoint."""
-
-    epoch: int = 0
-    """Epochs finished."""
-    env_steps: int = 0
-    updates: int = 0
-    episodes: int = 0
-    wall_s: float = 0.0
-    best_eval_success: float = -1.0
-    history: list[Row] = dataclasses.field(default_factory=list)
 
 
 class Trainer:
@@ -145,7 +130,8 @@ class Trainer:
         # Each worker's shard of the epoch first, then worker 0's checkpoint, which names the
         # epoch: a crash at any moment leaves a complete set for the epoch latest.pt holds.
         if not self.group.writes:
-            save_atomic(self.run.worker_shard(self.group.rank, state.epoch), self.snapshot(state, True))
+            shard = self.run.worker_shard(self.group.rank, state.epoch)
+            self.snapshot(state, include_replay=True).save(shard)
         self.group.barrier()
         if self.group.writes:
             self._save_run(state, improved)
@@ -156,44 +142,44 @@ class Trainer:
     def _save_run(self, state: TrainState, improved: bool) -> None:
         if improved:
             state.best_eval_success = state.history[-1]["eval_success"]
-            save_atomic(self.run.best, self.snapshot(state, include_replay=False))
+            self.snapshot(state, include_replay=False).save(self.run.best)
         if state.epoch == 1:  # kept to show what one epoch had learned (dtd heatmap)
-            save_atomic(self.run.first, self.snapshot(state, include_replay=False))
+            self.snapshot(state, include_replay=False).save(self.run.first)
         if keeps_epoch_snapshot(state.epoch, self.config):
-            save_atomic(self.run.epoch_snapshot(state.epoch), self.epoch_snapshot(state))
-        save_atomic(self.run.latest, self.snapshot(state, include_replay=True))
+            self.epoch_snapshot(state).save(self.run.epoch_snapshot(state.epoch))
+        self.snapshot(state, include_replay=True).save(self.run.latest)
 
-    def epoch_snapshot(self, state: TrainState) -> dict[str, Any]:
+    def epoch_snapshot(self, state: TrainState) -> Checkpoint:
         """The agent alone after ``state``'s epoch, as ``dtd explore`` reads it."""
-        return {
-            "env_id": self.spec.env_id,
-            "algo": self.config.algo.value,
-            "spec": dataclasses.asdict(self.spec),
-            "state": {
+        return Checkpoint(
+            env_id=self.spec.env_id,
+            algo=self.config.algo.value,
+            spec=dataclasses.asdict(self.spec),
+            counters={
                 "epoch": state.epoch,
                 "env_steps": state.env_steps,
                 "eval_success": state.history[-1]["eval_success"],
             },
-            "agent": self.agent.explaining_state(),
-        }
+            agent=self.agent.explaining_state(),
+        )
 
-    def snapshot(self, state: TrainState, include_replay: bool) -> dict[str, Any]:
+    def snapshot(self, state: TrainState, include_replay: bool) -> Checkpoint:
         """Everything needed to continue exactly where ``state`` stands."""
-        return {
-            "env_id": self.spec.env_id,
-            "algo": self.config.algo.value,
-            "spec": dataclasses.asdict(self.spec),
-            "config": self.config.to_dict(),
-            "state": dataclasses.asdict(state),
-            "worker": self.group.rank,
-            "agent": self.agent.state_dict(include_replay=include_replay),
-            "rng": {
+        return Checkpoint(
+            env_id=self.spec.env_id,
+            algo=self.config.algo.value,
+            spec=dataclasses.asdict(self.spec),
+            counters=dataclasses.asdict(state),
+            agent=self.agent.state_dict(include_replay=include_replay),
+            config=self.config.to_dict(),
+            rng={
                 "numpy": self.rng.bit_generator.state,
                 "torch": torch.get_rng_state(),
                 "collector": self.collector.state_dict(),
                 "eval_envs": env_rng_states(self.eval_envs),
             },
-        }
+            worker=self.group.rank,
+        )
 
 
 def keeps_epoch_snapshot(epoch: int, config: TrainConfig) -> bool:
@@ -206,21 +192,24 @@ def keeps_epoch_snapshot(epoch: int, config: TrainConfig) -> bool:
 
 
 def restore(
-    snapshot: dict[str, Any],
+    checkpoint: Checkpoint,
     agent: Agent,
     rng: np.random.Generator,
     collector: Collector,
     eval_envs: Sequence[gym.Env],
     path: Path,
 ) -> TrainState:
-    """Load a :meth:`Trainer.snapshot` (with replay) read from ``path``; return its counters."""
+    """Load a whole :meth:`Trainer.snapshot` (with replay) read from ``path`` into the run's
+    parts; return its counters."""
+    checkpoint.check_resumable(path)
+    assert checkpoint.rng is not None, "a whole checkpoint"
     with restoring(path):
-        agent.load_state_dict(snapshot["agent"])
-        rng.bit_generator.state = snapshot["rng"]["numpy"]
-        torch.set_rng_state(snapshot["rng"]["torch"])
-        collector.load_state_dict(snapshot["rng"]["collector"])
-        restore_env_rng_states(eval_envs, snapshot["rng"]["eval_envs"])
-        return TrainState(**snapshot["state"])
+        agent.load_state_dict(dict(checkpoint.agent))
+        rng.bit_generator.state = checkpoint.rng["numpy"]
+        torch.set_rng_state(checkpoint.rng["torch"])
+        collector.load_state_dict(checkpoint.rng["collector"])
+        restore_env_rng_states(eval_envs, checkpoint.rng["eval_envs"])
+        return checkpoint.train_state()
 
 
 def _prefixed(prefix: str, figures: dict[str, float]) -> dict[str, float]:

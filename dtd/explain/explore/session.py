@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from dtd.agents.segments import episode_plan
-from dtd.config import EVAL_SEED, Collection, Device
+from dtd.config import EVAL_SEED
 from dtd.errors import CheckpointError, ConfigError, DtdError, EnvError, RunDirError
 from dtd.experiments.curves import read_curve
 from dtd.explain.heatmap import (
@@ -33,9 +33,10 @@ from dtd.explain.heatmap import (
     table_of,
     value_slice,
 )
-from dtd.training.checkpoint import check_checkpoint, load_checkpoint, restoring
-from dtd.training.components import build, close_all
+from dtd.training.checkpoint import Checkpoint
+from dtd.training.components import build_acting
 from dtd.training.run_dir import RunDir, read_config
+from dtd.training.trained_run import on_the_cpu
 
 MAP_RESOLUTION = 50
 """Cells along each side of the table in a value map, unless asked otherwise."""
@@ -64,8 +65,6 @@ class EpochSnapshot:
     env_steps: int
     eval_success: float | None
     path: Path
-    whole: bool = False
-    """A whole checkpoint (first.pt, latest.pt) rather than an agent-only snapshot."""
 
 
 class Explorer:
@@ -75,17 +74,15 @@ class Explorer:
         self.run = RunDir(Path(run_dir))
         self.config = read_config(self.run)
         self.videos = Path(videos)
-        # Looking at a trained agent needs no GPU, wherever it was trained.
-        acting = dataclasses.replace(self.config, device=Device.cpu)
-        self.components = build(acting, eval_seed=seed, eval_envs=1, collection=Collection.inline)
-        self.components.collector.close()
-        self.env = self.components.eval_envs[0]
-        self.agent = self.components.agent
-        self.spec = self.components.spec
+        self.acting = build_acting(on_the_cpu(self.config), eval_seed=seed, eval_envs=1)
+        self.env = self.acting.envs[0]
+        self.agent = self.acting.agent
+        self.spec = self.acting.spec
         self.rng = np.random.default_rng(seed)
         self.episode_seeds = itertools.count(seed)
         self.videos_made = itertools.count(1)
-        self.states: OrderedDict[tuple[Path, int], tuple[dict[str, Any], dict[str, Any]]] = OrderedDict()
+        self.states: OrderedDict[tuple[Path, int], Checkpoint] = OrderedDict()
+        """The last epochs' networks read, without replay."""
         self.loaded: tuple[Path, int] | None = None
         self.renderer = None
         self.placement_table: Table | None = None
@@ -232,7 +229,7 @@ class Explorer:
     def close(self) -> None:
         if self.renderer is not None:
             self.renderer.close()
-        close_all(self.components)
+        self.acting.close()
 
     # -- inside ----------------------------------------------------------------------------
     def _check_on_table(self, block: Sequence[float], goal: Sequence[float]) -> None:
@@ -265,25 +262,17 @@ class Explorer:
         except OSError as exc:  # removed since it was listed (a run started again with --force)
             raise ExploreError(404, f"the snapshot of epoch {epoch} is gone ({exc.strerror})") from exc
         if key not in self.states:
-            stored = load_checkpoint(snapshot.path)
-            check_checkpoint(stored, self.config, self.spec, snapshot.path)
-            self.states[key] = (stored["agent"], stored["state"])
+            stored = Checkpoint.read(snapshot.path)
+            stored.check_fits(self.config, self.spec, snapshot.path)
+            self.states[key] = dataclasses.replace(stored, agent=stored.acting_agent_state())
             while len(self.states) > KEPT_STATES:
                 self.states.popitem(last=False)
         self.states.move_to_end(key)
-        agent_state, counters = self.states[key]
+        stored = self.states[key]
         if self.loaded != key:
-            with restoring(snapshot.path):
-                if snapshot.whole:
-                    self.agent.load_state_dict({k: v for k, v in agent_state.items() if k != "buffer"})
-                else:
-                    self.agent.load_explaining_state(agent_state)
+            stored.load_agent(self.agent, snapshot.path)
             self.loaded = key
-        return dataclasses.replace(
-            snapshot,
-            env_steps=int(counters.get("env_steps", -1)),
-            eval_success=counters.get("eval_success", snapshot.eval_success),
-        )
+        return dataclasses.replace(snapshot, env_steps=stored.env_steps, eval_success=stored.eval_success)
 
     def _legacy_checkpoints(self) -> list[EpochSnapshot]:
         """For runs made before agent-only snapshots were kept: first.pt and latest.pt."""
@@ -294,13 +283,10 @@ class Explorer:
             if not path.is_file():
                 continue
             try:
-                state = load_checkpoint(path)["state"]
+                stored = Checkpoint.read(path)
             except CheckpointError:
                 continue
-            history = state.get("history") or [{}]
-            found[state["epoch"]] = EpochSnapshot(
-                state["epoch"], state["env_steps"], history[-1].get("eval_success"), path, whole=True
-            )
+            found[stored.epoch] = EpochSnapshot(stored.epoch, stored.env_steps, stored.eval_success, path)
         return [found[epoch] for epoch in sorted(found)]
 
     def _progress(self) -> dict[str, Any] | None:

@@ -25,7 +25,6 @@ from dtd.explain.render import (
     goal_markers,
     render_episode,
 )
-from dtd.training.components import close_all
 from dtd.training.trained_run import load_run
 from tests.helpers import dtd
 
@@ -49,21 +48,21 @@ def colour_near(frame: np.ndarray, pixel: tuple[float, float], test) -> bool:
 
 def test_a_run_keeps_its_first_epoch_checkpoint(push_dtd_run):
     loaded = load_run(push_dtd_run, "first")
-    close_all(loaded.components)
-    assert loaded.snapshot["state"]["epoch"] == 1
-    assert "buffer" not in loaded.snapshot["agent"]
+    loaded.close()
+    assert loaded.checkpoint.epoch == 1 and loaded.checkpoint.whole
+    assert "buffer" not in loaded.checkpoint.agent
 
 
 def test_rendered_frames_show_goal_and_subgoal_where_they_project(push_dtd_run):
     loaded = load_run(push_dtd_run, "latest", seed=5)
-    env, agent, spec = loaded.components.eval_envs[0], loaded.components.agent, loaded.components.spec
+    env, agent, spec = loaded.envs[0], loaded.agent, loaded.spec
     assert isinstance(agent, DotToDotAgent)
     renderer = SceneRenderer(env, width=320, height=240, camera=camera_for(spec.env_id))
     try:
-        rendered = render_episode(env, agent, spec, renderer, loaded.components.rng, agent.bounds)
+        rendered = render_episode(env, agent, spec, renderer, loaded.rng, agent.bounds)
     finally:
         renderer.close()
-        close_all(loaded.components)
+        loaded.close()
     assert len(rendered.frames) == spec.horizon + 1
     assert all(frame.shape == (240, 320, 3) and frame.dtype == np.uint8 for frame in rendered.frames)
 
@@ -132,7 +131,7 @@ def test_heatmap_values_are_the_high_levels_values(push_dtd_run, tmp_path):
     assert heat.values.shape == (7, 7)
     loaded = load_run(push_dtd_run, "latest")
     try:
-        env, agent = loaded.components.eval_envs[0], loaded.components.agent
+        env, agent = loaded.envs[0], loaded.agent
         table = table_of(env)
         observation = place_block_and_goal(env, (1.15, 0.55), (1.45, 0.95))
         np.testing.assert_allclose(observation["achieved_goal"], [1.15, 0.55, table.block_z], atol=1e-6)
@@ -141,7 +140,7 @@ def test_heatmap_values_are_the_high_levels_values(push_dtd_run, tmp_path):
             direct = agent.subgoal_values(observation, observation["desired_goal"], cell)[0]
             assert heat.values[row, column] == pytest.approx(direct, abs=1e-6)
     finally:
-        close_all(loaded.components)
+        loaded.close()
     assert table.x[0] < heat.xs[0] < heat.xs[-1] < table.x[1]
     # The first epoch's critic is another function than the last one's.
     assert not np.allclose(columns[0][1][0].values, heat.values)

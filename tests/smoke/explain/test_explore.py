@@ -24,11 +24,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dtd.config import Algo, Collection, Preset, preset_config
+from dtd.config import Algo, Preset, preset_config
 from dtd.explain.explore.server import WAITING_MAPS
 from dtd.explain.heatmap import place_block_and_goal
-from dtd.training.checkpoint import load_checkpoint
-from dtd.training.components import build, close_all
+from dtd.training.checkpoint import Checkpoint
+from dtd.training.components import build_acting
 from dtd.training.run_dir import RunDir, read_config, write_config
 from tests.helpers import TINY, dtd
 
@@ -86,11 +86,12 @@ class HighLevel:
     def __init__(self, run_dir: Path) -> None:
         self.run = RunDir(run_dir)
         config = read_config(self.run)
-        self.components = build(config, eval_seed=0, eval_envs=1, collection=Collection.inline)
-        self.env, self.agent = self.components.eval_envs[0], self.components.agent
+        self.acting = build_acting(config, eval_seed=0, eval_envs=1)
+        self.env, self.agent = self.acting.envs[0], self.acting.agent
 
     def at(self, epoch: int) -> HighLevel:
-        self.agent.load_explaining_state(load_checkpoint(self.run.epoch_snapshot(epoch))["agent"])
+        path = self.run.epoch_snapshot(epoch)
+        Checkpoint.read(path).load_agent(self.agent, path)
         return self
 
     def values(self, block, goal, xs, ys, z) -> np.ndarray:
@@ -111,7 +112,7 @@ class HighLevel:
         )[0]
 
     def close(self) -> None:
-        close_all(self.components)
+        self.acting.close()
 
 
 @pytest.fixture(scope="module")
@@ -130,9 +131,9 @@ def high_level(push_dtd_run) -> Iterator[HighLevel]:
 def test_a_run_keeps_an_agent_only_snapshot_of_each_epoch(push_dtd_run):
     snapshots = RunDir(push_dtd_run).epoch_snapshots()
     assert list(snapshots) == [1, 2]
-    stored = load_checkpoint(snapshots[2])
-    assert stored["state"]["epoch"] == 2 and "buffer" not in stored["agent"]
-    assert "critic" in stored["agent"]["high"] and "critic" not in stored["agent"]["low"]
+    stored = Checkpoint.read(snapshots[2])
+    assert stored.epoch == 2 and not stored.whole and "buffer" not in stored.agent
+    assert "critic" in stored.agent["high"] and "critic" not in stored.agent["low"]
     # Smaller than the checkpoint kept after the first epoch, which can resume training.
     assert snapshots[1].stat().st_size < RunDir(push_dtd_run).first.stat().st_size / 3
 

@@ -17,7 +17,6 @@ from dtd.agents.dot_to_dot import DotToDotAgent
 from dtd.agents.segments import high_level_input
 from dtd.envs.make import make_env
 from dtd.envs.time_feature import TimeFeature
-from dtd.training.components import close_all
 from dtd.training.rollout import run_many
 from tests.helpers import TINY, dtd
 
@@ -44,19 +43,16 @@ def recorded(run_dir: Path) -> tuple[object, dict[str, np.ndarray]]:
     """The run's agent and the observations of deterministic episodes (at least RECORDED steps)."""
     from dtd.training.trained_run import load_run
 
-    loaded = load_run(run_dir, "latest", seed=5, envs=10)
-    components = loaded.components
-    episodes = run_many(
-        components.eval_envs, components.agent, components.spec, -(-RECORDED // 50), False, components.rng
-    )
-    close_all(components)
+    with load_run(run_dir, "latest", seed=5, envs=10) as loaded:
+        spec = loaded.spec
+        episodes = run_many(loaded.envs, loaded.agent, spec, -(-RECORDED // 50), False, loaded.rng)
     steps = {
-        "observation": episodes.obs[:, :-1].reshape(-1, components.spec.obs_dim)[:RECORDED],
-        "achieved_goal": episodes.achieved_goal[:, :-1].reshape(-1, components.spec.goal_dim)[:RECORDED],
-        "goal": np.repeat(episodes.desired_goal, components.spec.horizon, axis=0)[:RECORDED],
-        "step_goal": episodes.step_goal.reshape(-1, components.spec.goal_dim)[:RECORDED],
+        "observation": episodes.obs[:, :-1].reshape(-1, spec.obs_dim)[:RECORDED],
+        "achieved_goal": episodes.achieved_goal[:, :-1].reshape(-1, spec.goal_dim)[:RECORDED],
+        "goal": np.repeat(episodes.desired_goal, spec.horizon, axis=0)[:RECORDED],
+        "step_goal": episodes.step_goal.reshape(-1, spec.goal_dim)[:RECORDED],
     }
-    return components.agent, steps
+    return loaded.agent, steps
 
 
 def session(folder: Path, role: str):
@@ -108,9 +104,8 @@ def torch_episode(run_dir: Path, seed: int) -> np.ndarray:
     """The final achieved goal of the torch agent's deterministic episode from env.reset(seed)."""
     from dtd.training.trained_run import load_run
 
-    loaded = load_run(run_dir)
-    agent, spec = loaded.components.agent, loaded.components.spec
-    close_all(loaded.components)
+    with load_run(run_dir) as loaded:
+        agent, spec = loaded.agent, loaded.spec
     env = make_env(spec.env_id)
     if loaded.config.time_feature:
         env = TimeFeature(env)

@@ -109,3 +109,26 @@ def test_an_earlier_saved_evaluation_naming_its_old_paths_is_taken_as_it_is(snap
     assert json.loads(written)["run_dir"] == "reach-dtd-snapshots"  # the layout of the time
     assert final_evaluation(snapshot_run, episodes=3) == saved
     assert saved.read_bytes() == written
+
+
+def test_loading_a_run_to_act_makes_its_evaluation_environments_only(snapshot_run, monkeypatch):
+    from dtd.training import components, trained_run
+
+    made = []
+    real = components.make_task_envs
+
+    def counted(config, count):
+        made.append(count)
+        return real(config, count)
+
+    def no_collector(*args, **kwargs):
+        raise AssertionError("a collector was made to act")
+
+    monkeypatch.setattr(components, "make_task_envs", counted)
+    monkeypatch.setattr(components, "InlineCollector", no_collector)
+    monkeypatch.setattr(components, "ProcessCollector", no_collector)
+    with trained_run.load_run(snapshot_run, "latest", envs=3) as loaded:
+        assert len(loaded.envs) == 3 and loaded.checkpoint.whole and loaded.checkpoint.epoch == 2
+    assert made == [3]
+    result = trained_run.evaluate_run(snapshot_run, episodes=2)
+    assert result["epoch"] == 2 and made == [3, 2]

@@ -2,17 +2,20 @@
 count and collector chosen for the machine."""
 
 import dataclasses
+from pathlib import Path
 
 import pytest
 import torch
 
-from dtd.config import Collection, Preset, TrainConfig, preset_config
+from dtd.config import Algo, Collection, Preset, TrainConfig, preset_config
+from dtd.envs.spec import EnvSpec
 from dtd.errors import CheckpointError, ConfigError
 from dtd.training import components
-from dtd.training.checkpoint import FORMAT_VERSION, load_checkpoint, save_atomic
+from dtd.training.checkpoint import FORMAT_VERSION, Checkpoint, TrainState, load_checkpoint, save_atomic
 from dtd.training.lifecycle import resumed_config
 
 VALID = TrainConfig(env="FetchReach-v4")
+VALID_PATH = Path("run/checkpoints/latest.pt")
 
 
 def test_checkpoint_round_trip_and_errors(tmp_path):
@@ -30,6 +33,73 @@ def test_checkpoint_round_trip_and_errors(tmp_path):
     torch.save({"format_version": 99}, path)
     with pytest.raises(CheckpointError, match="format version 99"):
         load_checkpoint(path)
+
+
+def whole_checkpoint(**changes) -> Checkpoint:
+    fields = dict(
+        env_id="FetchReach-v4",
+        algo="her",
+        spec={"obs_dim": 10, "goal_dim": 3, "action_dim": 4, "horizon": 50},
+        counters=dataclasses.asdict(TrainState(epoch=2, env_steps=200, history=[{"eval_success": 0.5}])),
+        agent={"learner": {"actor": torch.ones(2)}, "buffer": {"size": 3}},
+        config=VALID.to_dict(),
+        rng={"numpy": {}, "torch": torch.zeros(1), "collector": {}, "eval_envs": []},
+        worker=1,
+    )
+    return Checkpoint(**{**fields, **changes})
+
+
+def test_a_checkpoint_record_is_written_and_read_back_as_it_was(tmp_path):
+    written = whole_checkpoint()
+    written.save(tmp_path / "c.pt")
+    read = Checkpoint.read(tmp_path / "c.pt")
+    assert read.whole and read.epoch == 2 and read.env_steps == 200 and read.eval_success == 0.5
+    assert read.worker == 1 and read.format_version == FORMAT_VERSION and read.config == VALID.to_dict()
+    assert read.train_state() == TrainState(epoch=2, env_steps=200, history=[{"eval_success": 0.5}])
+    assert torch.equal(read.agent["learner"]["actor"], torch.ones(2))
+    assert read.acting_agent_state().keys() == {"learner"}  # the replay left out
+    # The file's keys are those every earlier version wrote.
+    assert set(load_checkpoint(tmp_path / "c.pt")) == {
+        "format_version", "env_id", "algo", "spec", "state", "agent", "config", "worker", "rng",
+    }  # fmt: skip
+
+
+def test_an_agent_only_snapshot_is_no_whole_checkpoint_and_cannot_be_resumed(tmp_path):
+    snapshot = whole_checkpoint(
+        counters={"epoch": 3, "env_steps": 300, "eval_success": 0.25}, config=None, rng=None
+    )
+    snapshot.save(tmp_path / "s.pt")
+    read = Checkpoint.read(tmp_path / "s.pt")
+    assert not read.whole and read.epoch == 3 and read.eval_success == 0.25
+    assert set(load_checkpoint(tmp_path / "s.pt")) == {
+        "format_version",
+        "env_id",
+        "algo",
+        "spec",
+        "state",
+        "agent",
+    }
+    with pytest.raises(CheckpointError, match="agent-only snapshot"):
+        read.check_resumable(tmp_path / "s.pt")
+    with pytest.raises(CheckpointError, match="older dtd"):
+        whole_checkpoint(format_version=2).check_resumable(tmp_path / "c.pt")
+    whole_checkpoint().check_resumable(tmp_path / "c.pt")
+
+
+def test_a_file_lacking_a_part_of_a_checkpoint_is_refused_naming_it(tmp_path):
+    save_atomic(tmp_path / "c.pt", {"env_id": "FetchReach-v4", "algo": "her", "agent": {}})
+    with pytest.raises(CheckpointError, match=r"c\.pt lacks a part of a dtd checkpoint"):
+        Checkpoint.read(tmp_path / "c.pt")
+
+
+def test_a_checkpoint_of_another_task_or_algorithm_is_refused():
+    spec = EnvSpec("FetchReach-v4", 10, 3, 4, 1.0, 50, (0.0,) * 3, (1.0,) * 3)
+    config = dataclasses.replace(VALID, algo=Algo.her)
+    whole_checkpoint().check_fits(config, spec, VALID_PATH)
+    with pytest.raises(CheckpointError, match="belongs to a her run on FetchReach-v4, not to this dtd"):
+        whole_checkpoint().check_fits(dataclasses.replace(config, algo=Algo.dtd), spec, VALID_PATH)
+    with pytest.raises(CheckpointError, match="other dimensions"):
+        whole_checkpoint(spec={**whole_checkpoint().spec, "goal_dim": 2}).check_fits(config, spec, VALID_PATH)
 
 
 def test_resume_takes_the_stored_settings_and_allows_more_epochs():
@@ -77,3 +147,4 @@ def test_one_torch_thread_unless_asked_for_more(monkeypatch):
     assert components.resolved_threads(3) == 3
     monkeypatch.setenv("OMP_NUM_THREADS", "many")
     assert components.resolved_threads(0) == 1
+
