@@ -147,4 +147,3 @@ def test_one_torch_thread_unless_asked_for_more(monkeypatch):
     assert components.resolved_threads(3) == 3
     monkeypatch.setenv("OMP_NUM_THREADS", "many")
     assert components.resolved_threads(0) == 1
-
