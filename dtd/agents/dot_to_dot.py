@@ -4,6 +4,7 @@ reaches them, both the same learner, both trained with hindsight relabelling."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -12,7 +13,7 @@ import numpy as np
 from dtd.agents import subgoal_report
 from dtd.agents.buffer import EpisodeBuffer
 from dtd.agents.exploration import ActionNoise
-from dtd.agents.her import HindsightSampling
+from dtd.agents.her import GoalStrategy, HindsightSampling, relabel_probability
 from dtd.agents.interface import mean_metrics
 from dtd.agents.learner import GoalLearner
 from dtd.agents.networks import SubgoalHead
@@ -21,8 +22,11 @@ from dtd.agents.rotations import multiply, random_rotations
 from dtd.agents.segments import (
     high_level_input,
     sample_segment_transitions,
+    segment_bounds,
+    segment_window_end,
     segments_begun,
 )
+from dtd.config import DotToDotConfig, HighTarget, RelabelWindow
 from dtd.envs.goals import GoalFunctions
 
 
@@ -73,16 +77,16 @@ class DotToDotAgent:
         high: GoalLearner,
         buffer: EpisodeBuffer,
         goals: GoalFunctions,
-        bounds: np.ndarray,
+        horizon: int,
         action_noise: ActionNoise,
-        exploration: SubgoalExploration,
         low_sampling: HindsightSampling,
-        high_relabel_prob: float,
-        hindsight_action_prob: float,
-        high_updates: int,
-        high_observed_gamma: float | None = None,
-        high_actor_all_segments: bool = True,
+        settings: DotToDotConfig,
+        episodes_per_epoch: int,
     ) -> None:
+        """``low_sampling`` is how a flat HER agent would draw the low level's transitions;
+        ``settings`` cut the episodes of ``horizon`` steps into segments, and say how sub-goals
+        are explored (the hand-over schedule counted in epochs of ``episodes_per_epoch``) and
+        how the high level learns."""
         if not isinstance(high.head, SubgoalHead):
             raise TypeError("the high level's learner must propose sub-goals (a SubgoalHead)")
         self.low = low
@@ -90,20 +94,31 @@ class DotToDotAgent:
         self.buffer = buffer
         self.goals = goals
         """The task's reward, its verdict on reaching a goal and where it ends an episode."""
-        self.bounds = bounds
-        self.segment_starts = {int(start): n for n, start in enumerate(bounds[:-1])}
+        self.settings = settings
+        self.bounds = segment_bounds(horizon, settings.segments)
+        self.segment_starts = {int(start): n for n, start in enumerate(self.bounds[:-1])}
         self.action_noise = action_noise
-        self.exploration = exploration
-        self.low_sampling = low_sampling
+        self.exploration = SubgoalExploration(
+            HandOverSchedule(
+                settings.subgoal_eps_start,
+                settings.subgoal_eps_floor,
+                settings.subgoal_eps_decay_epochs,
+                episodes_per_epoch,
+            ),
+            settings.subgoal_sigma,
+            settings.subgoal_noise,
+            math.radians(settings.subgoal_rotation_angle),
+        )
+        within_segment = settings.low_relabel_window is RelabelWindow.segment
+        self.low_sampling = dataclasses.replace(
+            low_sampling, window_end=segment_window_end(self.bounds) if within_segment else None
+        )
         """How the low level draws its transitions: HER's, its relabelled goals within a window."""
-        self.high_relabel_prob = high_relabel_prob
-        self.hindsight_action_prob = hindsight_action_prob
-        self.high_updates = high_updates
-        """High-level updates per call of :meth:`train`."""
-        self.high_observed_gamma = high_observed_gamma
+        self.high_relabel_prob = relabel_probability(GoalStrategy.future, settings.high_replay_k)
+        self.high_observed_gamma = high.gamma if settings.high_target is HighTarget.observed else None
         """Where given, the segment before the last learns the value of its end from what the
         episode did next (see :func:`sample_segment_transitions`), discounted by it."""
-        self.high_actor_all_segments = high_actor_all_segments
+        self.high_actor_all_segments = settings.high_actor_last_segment
         """Whether the high level's actor learns also where the last segment starts."""
         self._subgoal: np.ndarray | None = None
 
@@ -195,7 +210,7 @@ class DotToDotAgent:
             size,
             rng,
             self.high_relabel_prob,
-            self.hindsight_action_prob,
+            self.settings.hindsight_action_prob,
             self.goals.reward,
             self.high_observed_gamma,
             self.goals.terminal,
@@ -211,15 +226,16 @@ class DotToDotAgent:
         self.high.update_normalizers(high.obs, high.goal)
 
     def train(self, updates: int, rng: np.random.Generator) -> dict[str, float]:
-        """``updates`` low-level updates with the high level's ``high_updates`` spread evenly
-        among them (Algorithm 1 of the paper: both levels learn in the same phase)."""
+        """``updates`` low-level updates with the high level's ``high_updates_per_cycle`` spread
+        evenly among them (Algorithm 1 of the paper: both levels learn in the same phase)."""
         stored = self.buffer.stored()
         low_metrics, high_metrics = [], []
         for i in range(updates):
             low_metrics.append(
                 self.low.update(self.low_sampling.sample(stored, self.low.config.batch_size, rng))
             )
-            for _ in range((i + 1) * self.high_updates // updates - i * self.high_updates // updates):
+            high_updates = self.settings.high_updates_per_cycle
+            for _ in range((i + 1) * high_updates // updates - i * high_updates // updates):
                 batch = self._high_batch(stored, self.high.config.batch_size, rng)
                 high_metrics.append(self.high.update(batch))
         self.low.update_target()

@@ -26,7 +26,7 @@ from typing import Annotated, Any
 
 import tyro
 
-from dtd.config import LearnerConfig, TrainConfig
+from dtd.config import DotToDotConfig, LearnerConfig, TrainConfig
 from dtd.errors import DtdError
 
 Command = Callable[[], None]
@@ -124,10 +124,16 @@ def options_class(
     """A frozen dataclass of :class:`TrainConfig`'s fields but ``omit``, defaults from
     ``defaults``, each with its help text (and the metavar and hint ``hints`` give);
     :func:`to_config` turns an instance back."""
-    types = typing.get_type_hints(TrainConfig)
-    docs = field_help(TrainConfig)
+    return _options(TrainConfig, defaults, omit, hints, "TrainOptions")
+
+
+def _options(
+    cls: type, defaults: Any, omit: frozenset[str], hints: dict[str, tuple[str, str]], name: str
+) -> type:
+    types = typing.get_type_hints(cls)
+    docs = field_help(cls)
     fields: list[tuple[str, Any, Any]] = []
-    for field in dataclasses.fields(TrainConfig):
+    for field in dataclasses.fields(cls):
         if field.name in omit:
             continue
         value = getattr(defaults, field.name)
@@ -137,12 +143,17 @@ def options_class(
             if field.name == "learner":
                 annotation = tyro.conf.OmitArgPrefixes[annotation]
             value = level()
+        elif isinstance(value, DotToDotConfig):
+            # Its options keep their names (--segments, --high.batch-size): no prefix.
+            group = _options(DotToDotConfig, value, omit, hints, "DotToDotOptions")
+            annotation = Annotated[group, tyro.conf.arg(name="")]
+            value = group()
         else:
             metavar, hint = hints.get(field.name, (None, None))
             arg = tyro.conf.arg(help=docs[field.name], metavar=metavar, help_behavior_hint=hint)
             annotation = Annotated[types[field.name], arg]
         fields.append((field.name, annotation, dataclasses.field(default=value)))
-    return dataclasses.make_dataclass("TrainOptions", fields, frozen=True)
+    return dataclasses.make_dataclass(name, fields, frozen=True)
 
 
 def _learner_options(defaults: LearnerConfig, high: bool) -> type:
@@ -160,11 +171,17 @@ def _learner_options(defaults: LearnerConfig, high: bool) -> type:
 
 def to_config(options: Any) -> TrainConfig:
     """The :class:`TrainConfig` an instance of an :func:`options_class` stands for."""
+    return TrainConfig(**_values(options))
+
+
+def _values(options: Any) -> dict[str, Any]:
     values = {field.name: getattr(options, field.name) for field in dataclasses.fields(options)}
     for name in ("learner", "high"):
         if name in values:
             values[name] = LearnerConfig(**dataclasses.asdict(values[name]))
-    return TrainConfig(**values)
+    if "dtd" in values:
+        values["dtd"] = DotToDotConfig(**_values(values["dtd"]))
+    return values
 
 
 def deferred(function: Callable[..., None], options: type | None = None) -> Callable[..., Command]:

@@ -8,7 +8,14 @@ import json
 from collections.abc import Sequence
 from typing import Any
 
-from dtd.config.settings import LOW_LEVEL_BATCH, LOW_LEVEL_N_STEP, LearnerConfig, Preset, TrainConfig
+from dtd.config.settings import (
+    DOT_TO_DOT_FIELDS,
+    LOW_LEVEL_BATCH,
+    LOW_LEVEL_N_STEP,
+    LearnerConfig,
+    Preset,
+    TrainConfig,
+)
 from dtd.errors import ConfigError
 
 
@@ -25,9 +32,10 @@ def with_algorithm_defaults(config: TrainConfig) -> TrainConfig:
 
 def flat_items(config: TrainConfig) -> dict[str, Any]:
     """Settings keyed by their option names without dashes: the low level's learner settings
-    unprefixed, the high level's as ``high.<name>``."""
+    and Dot-to-Dot's unprefixed, the high level's as ``high.<name>``."""
     flat = config.to_dict()
     flat.update(flat.pop("learner"))
+    flat.update(flat.pop("dtd"))
     flat.update({f"high.{name}": value for name, value in flat.pop("high").items()})
     return flat
 
@@ -88,10 +96,13 @@ LEARNER_FIELDS = frozenset(field.name for field in dataclasses.fields(LearnerCon
 
 
 def setting_path(name: str) -> str:
-    """A setting's dotted path in the configuration's data: the low level's learner settings,
-    named as their options are (``batch_size``, ``learner``), under ``learner.``."""
+    """A setting's dotted path in the configuration's data, from its name as its option has
+    it: the low level's learner settings (``batch_size``, ``learner``) under ``learner.``,
+    Dot-to-Dot's (``segments``, ``high.batch_size``) under ``dtd.``."""
     if "." not in name and name in LEARNER_FIELDS:
         return f"learner.{name}"
+    if name.split(".")[0] in DOT_TO_DOT_FIELDS:
+        return f"dtd.{name}"
     return name
 
 

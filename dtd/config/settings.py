@@ -7,7 +7,7 @@ import dataclasses
 import enum
 import types
 import typing
-from typing import Any
+from typing import Annotated, Any
 
 import tyro
 
@@ -196,6 +196,56 @@ sub-goals of FetchPush ran to the corners of the goal box and were never reached
 
 
 @dataclasses.dataclass(frozen=True)
+class DotToDotConfig:
+    """Settings of Dot-to-Dot alone: the segments an episode is cut into, how sub-goals are
+    explored, how the high level relabels, and the high level's learner."""
+
+    segments: int = 2
+    """dtd: segments an episode is cut into; one sub-goal each, the last one being the goal."""
+    # With 0.1 FetchPush passed 0.9 success within 200k steps on three seeds of three (one of
+    # three with the reference's 0.05), and FetchPickAndPlace reached 0.5 at 215k, not 270k.
+    subgoal_sigma: float = 0.1
+    """dtd: std of the Gaussian perturbation of the achieved goal proposed as a sub-goal (the
+    paper: 0.05)."""
+    subgoal_rotation_angle: float = 0.0
+    """dtd, goals with a rotation (the Hand tasks): perturbation sub-goals turn the achieved
+    rotation by a random angle of at most this many degrees about a random axis (0: Gaussian
+    noise of std --subgoal-sigma on the quaternion's entries)."""
+    subgoal_eps_start: float = 1.0
+    """dtd: probability of a perturbation sub-goal (instead of the high level's) at the start."""
+    subgoal_eps_floor: float = 0.1
+    """dtd: the probability of a perturbation sub-goal after the decay."""
+    subgoal_eps_decay_epochs: float = 30.0
+    """dtd: epochs over which that probability falls linearly from start to floor."""
+    subgoal_noise: float = 0.05
+    """dtd: std of the Gaussian exploration noise added to the high level's sub-goals."""
+    subgoal_max_distance: float = 0.3
+    """dtd: sub-goals lie within this distance (per coordinate) of the achieved goal, inside the goal box."""
+    high_replay_k: int = 4
+    """dtd: HER at the high level: goals replaced by later achieved goals in k/(k+1) of samples."""
+    hindsight_action_prob: float = 0.0
+    """dtd: probability of replacing a sampled sub-goal by the goal reached at its segment's end."""
+    # On FetchPush the whole episode learned faster than the segment (0.95 against 0.86 at 300k).
+    low_relabel_window: RelabelWindow = RelabelWindow.episode
+    """dtd: where the low level's relabelled goals come from."""
+    # It gets one transition per segment; with 10 FetchPush reached 0.97 success at 300k steps
+    # (one seed), at a quarter of the high level's cost with 40.
+    high_updates_per_cycle: int = 10
+    """dtd: gradient updates of the high level per cycle, spread among the low level's."""
+    high_target: HighTarget = HighTarget.bootstrap
+    """dtd: where the value of the segment before the last comes from: ``bootstrap``, the
+    target critic where the last segment starts with the goal as its sub-goal (the paper);
+    ``observed``, what the episode went on to earn against the goal (the last segment's mean
+    reward, then the final reward held for ever)."""
+    high_actor_last_segment: bool = True
+    """dtd: the high level's actor learns also from the states where the last segment starts,
+    where the goal is the sub-goal and the actor never chooses (off: only from the states
+    where it chooses)."""
+    high: LearnerConfig = HIGH_LEVEL_DEFAULTS
+    """dtd: settings of the high level's learner."""
+
+
+@dataclasses.dataclass(frozen=True)
 class TrainConfig:
     """A whole training run. Defaults are the ``tuned`` preset: the reference settings of OpenAI
     baselines' HER except where docs/tuning.md measured better (``PAPER_SETTINGS`` lists the
@@ -271,49 +321,9 @@ class TrainConfig:
     job's size); a resumed run's own, which another number cannot change."""
     learner: tyro.conf.OmitArgPrefixes[LearnerConfig] = LOW_LEVEL_DEFAULTS
     """Settings of the learner (of the low level, for dtd)."""
-    segments: int = 2
-    """dtd: segments an episode is cut into; one sub-goal each, the last one being the goal."""
-    # With 0.1 FetchPush passed 0.9 success within 200k steps on three seeds of three (one of
-    # three with the reference's 0.05), and FetchPickAndPlace reached 0.5 at 215k, not 270k.
-    subgoal_sigma: float = 0.1
-    """dtd: std of the Gaussian perturbation of the achieved goal proposed as a sub-goal (the
-    paper: 0.05)."""
-    subgoal_rotation_angle: float = 0.0
-    """dtd, goals with a rotation (the Hand tasks): perturbation sub-goals turn the achieved
-    rotation by a random angle of at most this many degrees about a random axis (0: Gaussian
-    noise of std --subgoal-sigma on the quaternion's entries)."""
-    subgoal_eps_start: float = 1.0
-    """dtd: probability of a perturbation sub-goal (instead of the high level's) at the start."""
-    subgoal_eps_floor: float = 0.1
-    """dtd: the probability of a perturbation sub-goal after the decay."""
-    subgoal_eps_decay_epochs: float = 30.0
-    """dtd: epochs over which that probability falls linearly from start to floor."""
-    subgoal_noise: float = 0.05
-    """dtd: std of the Gaussian exploration noise added to the high level's sub-goals."""
-    subgoal_max_distance: float = 0.3
-    """dtd: sub-goals lie within this distance (per coordinate) of the achieved goal, inside the goal box."""
-    high_replay_k: int = 4
-    """dtd: HER at the high level: goals replaced by later achieved goals in k/(k+1) of samples."""
-    hindsight_action_prob: float = 0.0
-    """dtd: probability of replacing a sampled sub-goal by the goal reached at its segment's end."""
-    # On FetchPush the whole episode learned faster than the segment (0.95 against 0.86 at 300k).
-    low_relabel_window: RelabelWindow = RelabelWindow.episode
-    """dtd: where the low level's relabelled goals come from."""
-    # It gets one transition per segment; with 10 FetchPush reached 0.97 success at 300k steps
-    # (one seed), at a quarter of the high level's cost with 40.
-    high_updates_per_cycle: int = 10
-    """dtd: gradient updates of the high level per cycle, spread among the low level's."""
-    high_target: HighTarget = HighTarget.bootstrap
-    """dtd: where the value of the segment before the last comes from: ``bootstrap``, the
-    target critic where the last segment starts with the goal as its sub-goal (the paper);
-    ``observed``, what the episode went on to earn against the goal (the last segment's mean
-    reward, then the final reward held for ever)."""
-    high_actor_last_segment: bool = True
-    """dtd: the high level's actor learns also from the states where the last segment starts,
-    where the goal is the sub-goal and the actor never chooses (off: only from the states
-    where it chooses)."""
-    high: LearnerConfig = HIGH_LEVEL_DEFAULTS
-    """dtd: settings of the high level's learner."""
+    dtd: Annotated[DotToDotConfig, tyro.conf.arg(name="")] = DotToDotConfig()
+    """Dot-to-Dot's segments, sub-goal exploration, high-level relabelling and high level's
+    learner (options without a prefix, but ``--high.<name>``); other algorithms ignore them."""
 
     def validate(self) -> None:
         """Raise :class:`ConfigError` naming the first setting that cannot work."""
@@ -329,8 +339,22 @@ class TrainConfig:
         :class:`ConfigError` naming the setting, missing keys take defaults (those of
         :data:`SETTINGS_BEFORE_THEIR_KEY` their value from before the key existed)."""
         if isinstance(data, dict):
-            data = {**SETTINGS_BEFORE_THEIR_KEY, **data}
+            data = _grouped({**SETTINGS_BEFORE_THEIR_KEY, **data})
         return cls(**_typed_fields(cls, data, ""))
+
+
+DOT_TO_DOT_FIELDS = tuple(field.name for field in dataclasses.fields(DotToDotConfig))
+
+
+def _grouped(data: dict[str, Any]) -> dict[str, Any]:
+    """Configuration data with Dot-to-Dot's settings under ``dtd``, where a run written before
+    they were grouped has them among the others."""
+    flat = {name: data[name] for name in DOT_TO_DOT_FIELDS if name in data}
+    if not flat:
+        return data
+    rest = {name: value for name, value in data.items() if name not in flat}
+    group = rest.get("dtd", {})
+    return {**rest, "dtd": {**flat, **group} if isinstance(group, dict) else group}
 
 
 def _typed_fields(cls: type, data: Any, prefix: str) -> dict[str, Any]:
@@ -353,6 +377,8 @@ def _typed(name: str, value: Any, kind: Any) -> Any:
     if kind is LearnerConfig:
         default = HIGH_LEVEL_DEFAULTS if name == "high" else LOW_LEVEL_DEFAULTS
         return dataclasses.replace(default, **_typed_fields(LearnerConfig, value, f"{name}."))
+    if kind is DotToDotConfig:  # its settings are named as their options are, without a prefix
+        return DotToDotConfig(**_typed_fields(DotToDotConfig, value, ""))
     if isinstance(kind, type) and issubclass(kind, enum.Enum):
         try:
             return kind(value)

@@ -50,45 +50,45 @@ def validate(config: TrainConfig) -> None:
             config.workers is None or config.workers >= 1,
             f"--workers must be at least 1, got {config.workers}",
         ),
-        (config.segments >= 2, f"--segments must be at least 2, got {config.segments}"),
+        (config.dtd.segments >= 2, f"--segments must be at least 2, got {config.dtd.segments}"),
         (
-            _finite_in(config.subgoal_sigma, 0, math.inf),
-            f"--subgoal-sigma must be >= 0, got {config.subgoal_sigma}",
+            _finite_in(config.dtd.subgoal_sigma, 0, math.inf),
+            f"--subgoal-sigma must be >= 0, got {config.dtd.subgoal_sigma}",
         ),
         (
-            _finite_in(config.subgoal_rotation_angle, 0, 180),
-            f"--subgoal-rotation-angle must lie in [0, 180] degrees, got {config.subgoal_rotation_angle}",
+            _finite_in(config.dtd.subgoal_rotation_angle, 0, 180),
+            f"--subgoal-rotation-angle must lie in [0, 180] degrees, got {config.dtd.subgoal_rotation_angle}",
         ),
         (
-            _finite_in(config.subgoal_eps_start, 0, 1) and _finite_in(config.subgoal_eps_floor, 0, 1),
+            _finite_in(config.dtd.subgoal_eps_start, 0, 1) and _finite_in(config.dtd.subgoal_eps_floor, 0, 1),
             "--subgoal-eps-start and --subgoal-eps-floor must lie in [0, 1]",
         ),
         (
-            _finite_in(config.subgoal_eps_decay_epochs, 0, math.inf),
-            f"--subgoal-eps-decay-epochs must be >= 0, got {config.subgoal_eps_decay_epochs}",
+            _finite_in(config.dtd.subgoal_eps_decay_epochs, 0, math.inf),
+            f"--subgoal-eps-decay-epochs must be >= 0, got {config.dtd.subgoal_eps_decay_epochs}",
         ),
         (
-            _finite_in(config.subgoal_noise, 0, math.inf),
-            f"--subgoal-noise must be >= 0, got {config.subgoal_noise}",
+            _finite_in(config.dtd.subgoal_noise, 0, math.inf),
+            f"--subgoal-noise must be >= 0, got {config.dtd.subgoal_noise}",
         ),
         (
-            _positive(config.subgoal_max_distance),
-            f"--subgoal-max-distance must be > 0, got {config.subgoal_max_distance}",
+            _positive(config.dtd.subgoal_max_distance),
+            f"--subgoal-max-distance must be > 0, got {config.dtd.subgoal_max_distance}",
         ),
         (config.n_step >= 0, f"--n-step must be 0 (the algorithm's) or more, got {config.n_step}"),
-        (config.high_replay_k >= 0, f"--high-replay-k must be 0 or more, got {config.high_replay_k}"),
+        (config.dtd.high_replay_k >= 0, f"--high-replay-k must be 0 or more, got {config.dtd.high_replay_k}"),
         (
-            config.high_updates_per_cycle >= 1,
-            f"--high-updates-per-cycle must be at least 1, got {config.high_updates_per_cycle}",
+            config.dtd.high_updates_per_cycle >= 1,
+            f"--high-updates-per-cycle must be at least 1, got {config.dtd.high_updates_per_cycle}",
         ),
         (
-            _finite_in(config.hindsight_action_prob, 0, 1),
-            f"--hindsight-action-prob must lie in [0, 1], got {config.hindsight_action_prob}",
+            _finite_in(config.dtd.hindsight_action_prob, 0, 1),
+            f"--hindsight-action-prob must lie in [0, 1], got {config.dtd.hindsight_action_prob}",
         ),
     ]
     # The low level's batch may be 0: the algorithm's (LOW_LEVEL_BATCH).
     checks += _learner_checks(config.learner, "--", smallest_batch=0)
-    checks += _learner_checks(config.high, "--high.", smallest_batch=1)
+    checks += _learner_checks(config.dtd.high, "--high.", smallest_batch=1)
     for ok, message in checks:
         if not ok:
             raise ConfigError(message)

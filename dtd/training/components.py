@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import math
 import os
 
 import gymnasium as gym
@@ -14,20 +13,18 @@ import torch
 
 from dtd.agents.buffer import EpisodeBuffer
 from dtd.agents.collective import ALONE, Collective
-from dtd.agents.dot_to_dot import DotToDotAgent, HandOverSchedule, SubgoalExploration
+from dtd.agents.dot_to_dot import DotToDotAgent
 from dtd.agents.exploration import ActionNoise
 from dtd.agents.flat import GoalConditionedAgent
 from dtd.agents.her import GoalStrategy, HindsightSampling, relabel_probability
 from dtd.agents.interface import Agent
 from dtd.agents.learners import make_learner
 from dtd.agents.networks import BoxActionHead, SubgoalHead
-from dtd.agents.segments import segment_bounds, segment_window_end
 from dtd.config import (
     Algo,
     Collection,
     Device,
     HighTarget,
-    RelabelWindow,
     TrainConfig,
     with_algorithm_defaults,
 )
@@ -88,55 +85,44 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
     if config.algo is not Algo.dtd:
         return GoalConditionedAgent(low, buffer, goals, noise, sampling)
 
-    if config.segments > spec.horizon:
-        raise ConfigError(f"--segments must be at most the horizon ({spec.horizon}), got {config.segments}")
-    bounds = segment_bounds(spec.horizon, config.segments)
+    settings = config.dtd
+    if settings.segments > spec.horizon:
+        raise ConfigError(f"--segments must be at most the horizon ({spec.horizon}), got {settings.segments}")
     # By default the high level discounts a segment as the low level discounts its steps.
     high_gamma = (
-        config.high.gamma if config.high.gamma is not None else gamma ** (spec.horizon / config.segments)
+        settings.high.gamma
+        if settings.high.gamma is not None
+        else gamma ** (spec.horizon / settings.segments)
     )
-    if config.high_target is HighTarget.observed and not high_gamma < 1.0:
+    if settings.high_target is HighTarget.observed and not high_gamma < 1.0:
         raise ConfigError(f"--high-target observed needs a high-level discount below 1, got {high_gamma}")
-    if config.high_target is HighTarget.observed and spec.ends_on_goal:
+    if settings.high_target is HighTarget.observed and spec.ends_on_goal:
         raise ConfigError(
             f"--high-target observed holds an episode's final reward for ever, and {spec.env_id} ends "
             "its episodes on reaching the goal; use --high-target bootstrap"
         )
-    head = SubgoalHead(config.subgoal_max_distance, spec.goal_low, spec.goal_high, spec.quaternion)
+    head = SubgoalHead(settings.subgoal_max_distance, spec.goal_low, spec.goal_high, spec.quaternion)
     high = make_learner(
         spec.obs_dim + spec.goal_dim,
         spec.goal_dim,
         spec.goal_dim,
         head,
-        config.high,
+        settings.high,
         high_gamma,
         spec.sparse_rewards,
         collective,
         device,
     )
-    schedule = HandOverSchedule(
-        config.subgoal_eps_start,
-        config.subgoal_eps_floor,
-        config.subgoal_eps_decay_epochs,
-        config.n_cycles * config.episodes_per_cycle,
-    )
-    window = segment_window_end(bounds) if config.low_relabel_window is RelabelWindow.segment else None
     return DotToDotAgent(
         low=low,
         high=high,
         buffer=buffer,
         goals=goals,
-        bounds=bounds,
+        horizon=spec.horizon,
         action_noise=noise,
-        exploration=SubgoalExploration(
-            schedule, config.subgoal_sigma, config.subgoal_noise, math.radians(config.subgoal_rotation_angle)
-        ),
-        low_sampling=dataclasses.replace(sampling, window_end=window),
-        high_relabel_prob=relabel_probability(GoalStrategy.future, config.high_replay_k),
-        hindsight_action_prob=config.hindsight_action_prob,
-        high_updates=config.high_updates_per_cycle,
-        high_observed_gamma=high_gamma if config.high_target is HighTarget.observed else None,
-        high_actor_all_segments=config.high_actor_last_segment,
+        low_sampling=sampling,
+        settings=settings,
+        episodes_per_epoch=config.n_cycles * config.episodes_per_cycle,
     )
 
 

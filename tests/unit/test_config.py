@@ -7,10 +7,12 @@ import pytest
 
 from dtd.config import (
     Algo,
+    DotToDotConfig,
     LearnerConfig,
     Preset,
     RelabelWindow,
     TrainConfig,
+    flat_items,
     preset_config,
     with_algorithm_defaults,
     with_settings,
@@ -26,7 +28,7 @@ def test_defaults_are_the_reference_settings_but_where_tuned():
     assert (c.buffer_size, c.replay_k, c.noise_eps, c.random_eps) == (1_000_000, 4, 0.2, 0.3)
     learner = c.learner
     assert learner.hidden_sizes == (256, 256, 256) and learner.batch_size == 0  # the algorithm's
-    assert c.high.batch_size == 256
+    assert c.dtd.high.batch_size == 256
     assert (learner.actor_lr, learner.critic_lr, learner.polyak, learner.action_l2) == (1e-3, 1e-3, 0.95, 1.0)
     assert (learner.norm_clip, learner.obs_clip, learner.norm_eps) == (5.0, 200.0, 0.01)
     assert learner.gamma is None and learner.clip_return
@@ -56,7 +58,7 @@ def test_the_low_levels_batch_is_the_algorithms_unless_given():
     given = TrainConfig(algo=Algo.dtd, learner=LearnerConfig(batch_size=512))
     assert with_algorithm_defaults(given).learner == given.learner
     assert with_algorithm_defaults(preset_config(Preset.paper, algo=Algo.her)).learner.batch_size == 256
-    assert with_algorithm_defaults(TrainConfig(algo=Algo.dtd)).high.batch_size == 256
+    assert with_algorithm_defaults(TrainConfig(algo=Algo.dtd)).dtd.high.batch_size == 256
 
 
 def test_n_step_is_the_algorithms_unless_given_and_one_for_runs_written_before_it():
@@ -71,7 +73,7 @@ def test_n_step_is_the_algorithms_unless_given_and_one_for_runs_written_before_i
     with pytest.raises(ConfigError, match="--batch-size must be at least 0"):
         dataclasses.replace(VALID, learner=LearnerConfig(batch_size=-1)).validate()
     with pytest.raises(ConfigError, match=r"--high\.batch-size must be at least 1"):
-        dataclasses.replace(VALID, high=LearnerConfig(batch_size=0)).validate()
+        dataclasses.replace(VALID, dtd=DotToDotConfig(high=LearnerConfig(batch_size=0))).validate()
 
 
 def test_dict_round_trip():
@@ -86,7 +88,7 @@ def test_settings_by_name_reach_both_learners_and_unknown_names_are_refused():
         VALID, ["updates_per_cycle=80", "learner.batch_size=512", "high.polyak=0.9", "collector=inline"]
     )
     assert changed.updates_per_cycle == 80 and changed.learner.batch_size == 512
-    assert changed.high.polyak == 0.9 and changed.learner.polyak == VALID.learner.polyak
+    assert changed.dtd.high.polyak == 0.9 and changed.learner.polyak == VALID.learner.polyak
     assert changed.collector.value == "inline" and changed.env == VALID.env
     for bad in ("nope=1", "learner.nope=1", "updates_per_cycle", "epochs.x=1"):
         with pytest.raises(ConfigError):
@@ -102,8 +104,8 @@ def test_paper_preset_is_the_reference_and_options_override_it():
     assert learner.hidden_sizes == (256, 256, 256) and learner.batch_size == 256
     assert (learner.actor_lr, learner.critic_lr, learner.polyak, learner.action_l2) == (1e-3, 1e-3, 0.95, 1.0)
     assert learner.gamma is None and learner.clip_return
-    assert paper.low_relabel_window is RelabelWindow.segment and paper.high_updates_per_cycle == 40
-    assert paper.subgoal_sigma == 0.05 and TrainConfig().subgoal_sigma == 0.1
+    assert paper.dtd.low_relabel_window is RelabelWindow.segment and paper.dtd.high_updates_per_cycle == 40
+    assert paper.dtd.subgoal_sigma == 0.05 and TrainConfig().dtd.subgoal_sigma == 0.1
     assert TrainConfig.from_dict(paper.to_dict()) == paper
     assert preset_config(Preset.tuned) == TrainConfig()
 
@@ -131,4 +133,25 @@ def test_stored_values_take_their_types():
     config = TrainConfig.from_dict({"noise_eps": 1, "learner": {"hidden_sizes": [64, 64], "gamma": None}})
     assert config.noise_eps == 1.0 and isinstance(config.noise_eps, float)
     assert config.learner.hidden_sizes == (64, 64) and config.learner.gamma is None
-    assert config.learner.batch_size == 0 and config.high.batch_size == 256  # each level's defaults
+    assert config.learner.batch_size == 0 and config.dtd.high.batch_size == 256  # each level's defaults
+
+
+def test_dot_to_dots_settings_are_one_group_read_also_from_runs_written_flat():
+    config = dataclasses.replace(VALID, algo=Algo.dtd, dtd=DotToDotConfig(segments=3, high_replay_k=2))
+    data = config.to_dict()
+    assert data["dtd"]["segments"] == 3 and data["dtd"]["high"]["batch_size"] == 256
+    assert "segments" not in data and "high" not in data
+    assert TrainConfig.from_dict(data) == config
+    # config.json of a run written before the settings were grouped: the same configuration.
+    flat = {name: value for name, value in data.items() if name != "dtd"} | data["dtd"]
+    assert TrainConfig.from_dict(flat) == config
+    with pytest.raises(ConfigError, match=r"high\.batch_size must be an integer"):
+        TrainConfig.from_dict({**flat, "high": {**data["dtd"]["high"], "batch_size": "x"}})
+    with pytest.raises(ConfigError, match=r"unknown setting.*segmints"):
+        TrainConfig.from_dict({**data, "dtd": {**data["dtd"], "segmints": 3}})
+    # Option names stay as they were: no dtd. prefix anywhere a setting is named.
+    flat_names = flat_items(config)
+    assert flat_names["segments"] == 3 and flat_names["high.batch_size"] == 256 and "dtd" not in flat_names
+    named = with_settings(config, ["segments=4", "high.batch_size=64", "high_target=observed"])
+    assert (named.dtd.segments, named.dtd.high.batch_size) == (4, 64)
+    assert named.dtd.high_target.value == "observed"

@@ -137,8 +137,8 @@ def test_the_paper_preset_gives_the_defaults_and_options_beside_it_win(tmp_path)
                  "--low-relabel-window", "episode", *TINY, "--run-dir", run_dir)  # fmt: skip
     assert result.returncode == 0, result.stderr
     config = json.loads((run_dir / "config.json").read_text())["config"]
-    assert config["preset"] == "paper" and config["low_relabel_window"] == "episode"
-    assert config["high_updates_per_cycle"] == 40 and config["updates_per_cycle"] == 5
+    assert config["preset"] == "paper" and config["dtd"]["low_relabel_window"] == "episode"
+    assert config["dtd"]["high_updates_per_cycle"] == 40 and config["updates_per_cycle"] == 5
 
 
 def test_a_run_records_the_batch_its_algorithm_chose(tmp_path):

@@ -3,13 +3,15 @@ sub-goal choice, the hand-over schedule, sub-goal bounds and rotations."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import torch
 
 from dtd.agents.buffer import EpisodeBuffer
 from dtd.agents.ddpg import DDPGLearner
-from dtd.agents.dot_to_dot import DotToDotAgent, HandOverSchedule, SubgoalExploration
+from dtd.agents.dot_to_dot import DotToDotAgent, HandOverSchedule
 from dtd.agents.exploration import ActionNoise
 from dtd.agents.her import HindsightSampling
 from dtd.agents.networks import BoxActionHead, SubgoalHead
@@ -24,7 +26,7 @@ from dtd.agents.segments import (
     segments_begun,
     subgoal_placement,
 )
-from dtd.config import LearnerConfig
+from dtd.config import DotToDotConfig, LearnerConfig, RelabelWindow
 from dtd.envs.make import make_envs
 from dtd.training.checkpoint import load_checkpoint, save_atomic
 from tests.helpers import sparse_goals
@@ -198,20 +200,27 @@ def make_agent(seed: int = 0, eps: float = 1.0, high_updates: int = 4, segments:
     low = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), config, 0.9, (-1.0, 0.0))
     head = SubgoalHead(0.3, (-1.0,) * GOAL, (60.0,) * GOAL, None)
     high = DDPGLearner(OBS + GOAL, GOAL, GOAL, head, config, 0.5, (-1.0, 0.0))
-    bounds = segment_bounds(T, segments)
     goals = sparse_goals(reached_reward)
+    settings = DotToDotConfig(
+        segments=segments,
+        subgoal_eps_start=eps,
+        subgoal_eps_floor=eps,
+        subgoal_eps_decay_epochs=0,
+        subgoal_sigma=0.1,
+        subgoal_noise=0.1,
+        low_relabel_window=RelabelWindow.segment,
+        high_updates_per_cycle=high_updates,
+    )
     return DotToDotAgent(
         low=low,
         high=high,
         buffer=EpisodeBuffer(20, T, OBS, GOAL, ACT),
         goals=goals,
-        bounds=bounds,
+        horizon=T,
         action_noise=ActionNoise(0.2, 0.3, 1.0),
-        exploration=SubgoalExploration(HandOverSchedule(eps, eps, 0, 1), sigma=0.1, noise=0.1),
-        low_sampling=HindsightSampling(0.8, goals.reward, low.gamma, window_end=segment_window_end(bounds)),
-        high_relabel_prob=0.8,
-        hindsight_action_prob=0.0,
-        high_updates=high_updates,
+        low_sampling=HindsightSampling(0.8, goals.reward, low.gamma),
+        settings=settings,
+        episodes_per_epoch=1,
     )
 
 
@@ -370,18 +379,25 @@ def make_pose_agent(rotation_angle: float) -> DotToDotAgent:
     def within_a_tenth(achieved: np.ndarray, goal: np.ndarray) -> np.ndarray:
         return -(angle_between(achieved[..., 3:], goal[..., 3:]) > 0.1).astype(np.float32)
 
+    settings = DotToDotConfig(
+        subgoal_eps_start=1.0,
+        subgoal_eps_floor=1.0,
+        subgoal_eps_decay_epochs=0,
+        subgoal_sigma=0.1,
+        subgoal_noise=0.1,
+        subgoal_rotation_angle=math.degrees(rotation_angle),
+        high_updates_per_cycle=1,
+    )
     return DotToDotAgent(
         low=low,
         high=high,
         buffer=EpisodeBuffer(20, T, OBS, goal_dim, ACT),
         goals=sparse_goals(within_a_tenth),
-        bounds=segment_bounds(T, 2),
+        horizon=T,
         action_noise=ActionNoise(0.2, 0.3, 1.0),
-        exploration=SubgoalExploration(HandOverSchedule(1.0, 1.0, 0, 1), 0.1, 0.1, rotation_angle),
         low_sampling=HindsightSampling(0.8, within_a_tenth, low.gamma),
-        high_relabel_prob=0.8,
-        hindsight_action_prob=0.0,
-        high_updates=1,
+        settings=settings,
+        episodes_per_epoch=1,
     )
 
 

@@ -40,7 +40,7 @@ def test_a_grid_trains_every_combination_of_its_settings_each_in_a_directory_nam
     assert trials[3].name == "FetchPush-v4-dtd-learner=tqc-hidden_sizes=32-high.learner=sac-s0"
     settings = {(t.config.learner.learner, t.config.learner.hidden_sizes, t.config.seed) for t in trials}
     assert len(settings) == 8 and (LearnerKind.tqc, (64, 64), 1) in settings
-    assert all(t.config.high.learner is LearnerKind.sac for t in trials)
+    assert all(t.config.dtd.high.learner is LearnerKind.sac for t in trials)
     assert len({t.run_dir for t in trials}) == 8
 
 
