@@ -13,7 +13,7 @@ from dtd.cli.options import REQUIRED_ENV_UNLESS_RESUMED, deferred, options_class
 from dtd.cli.training import plot, sweep, train
 from dtd.config import Preset, preset_config
 from dtd.errors import DtdError, MachineError, WorkerLost
-from dtd.training.launch import INTERRUPTED_EXIT, LOST_WORKER_EXIT, reports_for_itself
+from dtd.training.launch import INTERRUPTED_EXIT, LOST_WORKER_EXIT, JobPlace
 
 DESCRIPTION = "Dot-to-Dot: train and explain goal-conditioned agents (DDPG, HER, DtD)."
 
@@ -35,10 +35,13 @@ def preset_named(argv: list[str]) -> Preset:
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``dtd`` command."""
     args = sys.argv[1:] if argv is None else argv
+    # Asked of the environment here alone: whether this process is a worker of a job.
+    place = JobPlace.from_environment()
     # The preset supplies the defaults the other options override, so it is read first.
     preset = preset_config(preset_named(args))
+    train_options = options_class(preset, hints=REQUIRED_ENV_UNLESS_RESUMED)
     commands = {
-        "train": deferred(train, options_class(preset, hints=REQUIRED_ENV_UNLESS_RESUMED)),
+        "train": deferred(train, train_options, bound={"place": place, "invocation": tuple(args)}),
         "sweep": deferred(sweep, options_class(preset, omit=frozenset({"algo", "workers"}))),
         "plot": deferred(plot),
         "eval": deferred(evaluate),
@@ -63,7 +66,7 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(2)
     except WorkerLost as exc:
         # A worker dtd started here leaves the report to its launcher, which knows who died.
-        if not reports_for_itself():
+        if not place.reports_for_itself:
             sys.exit(LOST_WORKER_EXIT)
         print(f"dtd: error: {exc}{_how_to_continue(args, exc)}", file=sys.stderr)
         sys.exit(1)
@@ -71,7 +74,7 @@ def main(argv: list[str] | None = None) -> None:
         print(f"dtd: error: {exc}", file=sys.stderr)
         sys.exit(1)
     except KeyboardInterrupt as exc:
-        if reports_for_itself():
+        if place.reports_for_itself:
             print(f"dtd: interrupted{_how_to_continue(args, exc)}", file=sys.stderr)
         sys.exit(INTERRUPTED_EXIT)
 

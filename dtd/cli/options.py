@@ -21,7 +21,7 @@ import re
 import sys
 import textwrap
 import typing
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Annotated, Any
 
 import tyro
@@ -184,14 +184,20 @@ def _values(options: Any) -> dict[str, Any]:
     return values
 
 
-def deferred(function: Callable[..., None], options: type | None = None) -> Callable[..., Command]:
+def deferred(
+    function: Callable[..., None], options: type | None = None, bound: Mapping[str, Any] | None = None
+) -> Callable[..., Command]:
     """A stand-in for command ``function`` that tyro parses into: the same options (its
     ``config`` parameter as the view ``options``) and help, returning the call to make
-    instead of making it."""
+    instead of making it; the parameters named in ``bound`` are no options, but given these
+    values."""
+    bound = dict(bound or {})
     signature = inspect.signature(function)
     hints = typing.get_type_hints(function, include_extras=True)
     parameters = []
     for parameter in signature.parameters.values():
+        if parameter.name in bound:
+            continue
         annotation = as_declared(hints.get(parameter.name, parameter.annotation), parameter.default)
         if parameter.name == "config" and options is not None:
             annotation = Annotated[options, tyro.conf.arg(name="")]
@@ -202,7 +208,7 @@ def deferred(function: Callable[..., None], options: type | None = None) -> Call
     def parse(**given: Any) -> Command:
         if "config" in given:
             given["config"] = to_config(given["config"])
-        return functools.partial(function, **given)
+        return functools.partial(function, **given, **bound)
 
     parse.__signature__ = signature.replace(parameters=parameters)  # type: ignore[attr-defined]
     parse.__annotations__ = {parameter.name: parameter.annotation for parameter in parameters}
@@ -222,20 +228,11 @@ def as_declared(hint: Any, default: Any) -> Any:
     return annotated[0] if len(members) == 2 and len(annotated) == 1 and type(None) in members else hint
 
 
-_INVOCATION: list[str] = []
-
-
-def invocation() -> list[str]:
-    """The arguments of the running ``dtd`` command (what its workers are started with)."""
-    return list(_INVOCATION)
-
-
 def parse_command(commands: dict[str, Callable[..., Command]], description: str, args: list[str]) -> Command:
     """The command ``args`` name, parsed; ``--help`` prints and exits 0, a parse error is a
     :class:`DtdError` of one line."""
     if args and not args[0].startswith("-") and args[0] not in commands:
         raise DtdError(f"unknown command {args[0]!r}; the commands are {', '.join(commands)}")
-    _INVOCATION[:] = args
     errors = io.StringIO()
     try:
         with contextlib.redirect_stderr(errors):

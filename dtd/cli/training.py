@@ -16,6 +16,7 @@ import tyro
 from dtd.cli.options import optional
 from dtd.config import TrainConfig
 from dtd.errors import DtdError
+from dtd.training.launch import ALONE_HERE, JobPlace
 
 
 def train(
@@ -25,6 +26,8 @@ def train(
     force: bool = False,
     progress: bool = True,
     oversubscribe: bool = False,
+    place: JobPlace = ALONE_HERE,
+    invocation: tuple[str, ...] = (),
 ) -> None:
     """Train an agent; results land in the run directory.
 
@@ -45,21 +48,22 @@ def train(
         force: Replace a run that already exists in --run-dir.
         progress: Show a live progress bar.
         oversubscribe: Start more workers than this machine has cores (each then runs slower).
+        place: This process's place in a job of workers (the command line reads it).
+        invocation: The command's arguments, which the workers started here are given.
     """
-    from dtd.training.launch import launched_workers
-
-    if launched_workers() is None:
+    if not place.in_job:
         workers = _workers_of(config, resume)
         if workers > 1:
-            _launch_workers(config, run_dir, resume, force, workers, oversubscribe)
+            _launch_workers(config, run_dir, resume, force, workers, oversubscribe, invocation)
             return
-    from dtd.training.launch import is_worker_zero
     from dtd.training.lifecycle import epochs_recorded
     from dtd.training.lifecycle import train as train_run
 
     before = epochs_recorded(resume) if resume is not None else 0
-    state = train_run(config, run_dir=run_dir, resume=resume, force=force, show_progress=progress)
-    if not is_worker_zero():
+    state = train_run(
+        config, run_dir=run_dir, resume=resume, force=force, show_progress=progress, place=place
+    )
+    if not place.reports:
         return  # worker 0 reports for the job
     if resume is not None and state.epoch <= before:
         print(
@@ -99,9 +103,9 @@ def _launch_workers(
     force: bool,
     workers: int,
     oversubscribe: bool,
+    invocation: tuple[str, ...],
 ) -> None:
     """Check the run, start its workers here, and report how the job ended in one line."""
-    from dtd.cli.options import invocation
     from dtd.errors import ConfigError, MachineError
     from dtd.training.components import usable_cores
     from dtd.training.launch import INTERRUPTED_EXIT, LOST_WORKER_EXIT, launch_local
@@ -117,7 +121,7 @@ def _launch_workers(
     # The cores are shared out: each worker's torch threads (where --threads leaves it open).
     threads = max(1, cores // workers)
     try:
-        ends = launch_local(invocation(), workers, threads)
+        ends = launch_local(invocation, workers, threads)
     except KeyboardInterrupt as interrupt:
         interrupt.run_dir = run.root  # type: ignore[attr-defined]
         raise

@@ -32,7 +32,6 @@ from dtd.envs.make import env_kwargs, make_envs
 from dtd.envs.spec import EnvSpec, goal_functions
 from dtd.errors import ConfigError
 from dtd.training.collector import Collector, InlineCollector, ProcessCollector
-from dtd.training.launch import local_workers
 
 
 @dataclasses.dataclass
@@ -177,6 +176,7 @@ def build(
     collection: Collection | None = None,
     worker: int = 0,
     collective: Collective = ALONE,
+    local_workers: int = 1,
 ) -> Components:
     """Environments, agent, collector and random generators for ``config``, all seeded from
     ``config.seed``.
@@ -184,14 +184,15 @@ def build(
     ``collection`` overrides ``config.collector``. Data-parallel ``worker`` k > 0 of a run
     seeds its environments, exploration and replay sampling apart from worker 0 (whose
     seeds are a run of its own's) and combines its updates through ``collective``; the
-    networks start the same on every worker.
+    networks start the same on every worker; ``local_workers`` of the run share this machine.
     """
     acting = build_acting(config, worker=worker, collective=collective)
     seeds = _run_seeds(config, worker)
     collection = collection or config.collector
     exploring_side = functools.partial(_exploring_side, config, seeds.training, seeds.exploration)
     try:
-        if resolved_collection(collection, resolved_threads(config.threads)) is Collection.process:
+        threads = resolved_threads(config.threads)
+        if resolved_collection(collection, threads, local_workers) is Collection.process:
             collector: Collector = ProcessCollector(exploring_side, acting.agent)
         else:
             train, _, _, explore_rng = exploring_side(acting.agent)
@@ -227,13 +228,13 @@ def resolved_device(device: Device) -> torch.device:
     return torch.device(device.value)
 
 
-def resolved_collection(collection: Collection, threads: int) -> Collection:
+def resolved_collection(collection: Collection, threads: int, local_workers: int = 1) -> Collection:
     """``auto`` made concrete for a learner of ``threads`` torch threads: a collecting process
     where a core of this worker's share of the machine is left for it, else inline (a process
     beside threads on every core would only take turns with them)."""
     if collection is not Collection.auto:
         return collection
-    return Collection.process if usable_cores() // local_workers() > threads else Collection.inline
+    return Collection.process if usable_cores() // local_workers > threads else Collection.inline
 
 
 def resolved_threads(threads: int) -> int:

@@ -1,17 +1,19 @@
-"""Starting the data-parallel workers of one run on this machine (``dtd train --workers N``),
-as torchrun would: one ``dtd train`` process per worker, the rendezvous in their environment,
-and the job stopped as a whole when one of them fails. Light enough for the command line to
-import before torch."""
+"""A process's place among the data-parallel workers of one run, read from its environment once
+(:class:`JobPlace`), and starting the workers of a run on this machine (``dtd train --workers
+N``) with torch.distributed's own launcher, the local agent torchrun runs: one ``dtd train``
+process per worker, the rendezvous theirs, the job stopped as a whole when one of them fails or
+the launcher is interrupted. Light enough for the command line to import before torch."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import logging
 import os
 import signal
-import subprocess
 import sys
-import time
-from collections.abc import Sequence
+import uuid
+from collections.abc import Iterator, Mapping, Sequence
 
 LOCAL_LAUNCH = "DTD_LOCAL_WORKERS"
 """Set in the environment of workers ``dtd train --workers N`` started on this machine: their
@@ -23,28 +25,50 @@ LOST_WORKER_EXIT = 75
 INTERRUPTED_EXIT = 130
 
 
-def launched_workers() -> int | None:
-    """The number of workers of the job this process belongs to (torchrun's or dtd's own
-    launch: ``WORLD_SIZE`` is set), else None."""
-    value = os.environ.get("WORLD_SIZE", "").strip()
-    return int(value) if value.isdigit() else None
+@dataclasses.dataclass(frozen=True)
+class JobPlace:
+    """Where this process stands: a run of its own, or worker ``rank`` of a job of ``workers``
+    (started by torchrun or by ``dtd train --workers N``, which name them in the environment)."""
+
+    workers: int | None = None
+    """The job's size (``WORLD_SIZE``); None outside a job."""
+    rank: int = 0
+    local_workers: int = 1
+    """Workers of the job on this machine (``LOCAL_WORLD_SIZE``), who share its cores."""
+    launched_here: bool = False
+    """Started by ``dtd train --workers N`` on this machine, whose launcher reports for it."""
+
+    @classmethod
+    def from_environment(cls, environ: Mapping[str, str] = os.environ) -> JobPlace:
+        def number(name: str) -> int | None:
+            value = environ.get(name, "").strip()
+            return int(value) if value.isdigit() else None
+
+        return cls(
+            workers=number("WORLD_SIZE"),
+            rank=number("RANK") or 0,
+            local_workers=max(number("LOCAL_WORLD_SIZE") or 1, 1),
+            launched_here=LOCAL_LAUNCH in environ,
+        )
+
+    @property
+    def in_job(self) -> bool:
+        return self.workers is not None
+
+    @property
+    def reports(self) -> bool:
+        """Whether this process reports the job's end (a run of its own, or worker 0)."""
+        return self.rank == 0
+
+    @property
+    def reports_for_itself(self) -> bool:
+        """Whether it reports an interruption or a lost worker itself: a run of its own, or
+        worker 0 of a torchrun job; workers launched here leave it to their launcher."""
+        return self.reports and not self.launched_here
 
 
-def local_workers() -> int:
-    """Workers of this job on this machine (1 outside a job)."""
-    value = os.environ.get("LOCAL_WORLD_SIZE", "").strip()
-    return int(value) if value.isdigit() and int(value) > 0 else 1
-
-
-def is_worker_zero() -> bool:
-    """Whether this process is a run of its own or worker 0 of a job (the one that reports)."""
-    return os.environ.get("RANK", "0").strip() in ("", "0")
-
-
-def reports_for_itself() -> bool:
-    """Whether this process reports an interruption or a lost worker itself: a run of its own,
-    or worker 0 of a torchrun job; locally launched workers leave it to their launcher."""
-    return LOCAL_LAUNCH not in os.environ and is_worker_zero()
+ALONE_HERE = JobPlace()
+"""A process that is a run of its own."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,76 +89,64 @@ class WorkerEnd:
         return f"worker {self.rank} (pid {self.pid}) exited with status {self.returncode}"
 
 
-def job_environment(workers: int, port: int, threads: int) -> dict[str, str]:
-    """What torchrun's agent sets for every worker of a one-machine job of ``workers``, less the
-    worker's rank: the group's size, its rendezvous store on ``port`` (held by the launcher),
-    and ``threads`` torch threads each."""
-    return {
-        "WORLD_SIZE": str(workers),
-        "LOCAL_WORLD_SIZE": str(workers),
-        "MASTER_ADDR": "127.0.0.1",
-        "MASTER_PORT": str(port),
-        "TORCHELASTIC_USE_AGENT_STORE": "True",
-        "OMP_NUM_THREADS": str(threads),
-    }
-
-
 def launch_local(args: Sequence[str], workers: int, threads: int, poll_s: float = 0.2) -> list[WorkerEnd]:
     """Run ``dtd`` with ``args`` as ``workers`` processes on this machine, each a worker of one
-    job with ``threads`` torch threads; return how they ended. When one ends badly the others
-    are stopped (SIGTERM, then SIGKILL after 10 s); the first to fail comes first.
+    job with ``threads`` torch threads, under torch.distributed's local elastic agent (no
+    restarts); return how they ended, the first to fail first (all 0 when the job succeeded).
+    When one ends badly the agent stops the others. An interrupt of the launcher (SIGINT or
+    SIGTERM) stops them too and is raised here as :class:`KeyboardInterrupt`."""
+    from torch.distributed.elastic.multiprocessing.api import SignalException
+    from torch.distributed.elastic.multiprocessing.errors import ChildFailedError
+    from torch.distributed.launcher.api import LaunchConfig, elastic_launch
 
-    The launcher holds the job's rendezvous store, as torchrun's agent does, on a port the
-    system chose when it was bound: jobs started side by side cannot meet on one port."""
-    store = _rendezvous_store()
-    env = {**os.environ, **job_environment(workers, store.port, threads), LOCAL_LAUNCH: "1"}
-    processes = [
-        subprocess.Popen(
-            [sys.executable, "-m", "dtd", *args],
-            env={**env, "RANK": str(rank), "LOCAL_RANK": str(rank)},
-        )
-        for rank in range(workers)
-    ]
-    ends: list[WorkerEnd] = []
+    _quiet_agent()
+    config = LaunchConfig(
+        min_nodes=1,
+        max_nodes=1,
+        nproc_per_node=workers,
+        run_id=uuid.uuid4().hex,
+        rdzv_backend="c10d",
+        rdzv_endpoint="127.0.0.1:0",  # a port of the system's choosing: jobs side by side never meet
+        max_restarts=0,
+        monitor_interval=poll_s,
+    )
     try:
-        while len(ends) < workers:
-            for rank, process in enumerate(processes):
-                if process.returncode is None and process.poll() is not None:
-                    ends.append(WorkerEnd(rank, process.pid, process.returncode))
-            if any(end.returncode != 0 for end in ends):
-                break
-            time.sleep(poll_s)
+        with _worker_environment({LOCAL_LAUNCH: "1", "OMP_NUM_THREADS": str(threads)}):
+            elastic_launch(config, sys.executable)("-m", "dtd", *args)
+    except ChildFailedError as failed:
+        by_time = sorted(failed.failures.items(), key=lambda item: item[1].timestamp)
+        ends = [WorkerEnd(rank, failure.pid, failure.exitcode) for rank, failure in by_time]
+        return _first_failure_first(ends)
+    except SignalException as stop:
+        raise KeyboardInterrupt(f"the launcher got {stop.sigval.name}") from None
+    return [WorkerEnd(rank, 0, 0) for rank in range(workers)]
+
+
+def _quiet_agent() -> None:
+    """The agent logs each step and failure; the command reports the job's end in one line."""
+    for name in list(logging.root.manager.loggerDict):
+        if name.startswith("torch.distributed.elastic") or name.startswith("torch.distributed.launcher"):
+            logging.getLogger(name).setLevel(logging.CRITICAL)
+
+
+@contextlib.contextmanager
+def _worker_environment(values: Mapping[str, str]) -> Iterator[None]:
+    """This process's environment, which the agent hands its workers, with ``values`` set."""
+    before = {name: os.environ.get(name) for name in values}
+    os.environ.update(values)
+    try:
+        yield
     finally:
-        _stop(processes)
-    for rank, process in enumerate(processes):
-        if all(end.rank != rank for end in ends):
-            ends.append(WorkerEnd(rank, process.pid, process.returncode))
-    return _first_failure_first(ends)
-
-
-def _rendezvous_store():
-    """A rendezvous store on a loopback port of the system's choosing, for workers to join."""
-    import torch.distributed as dist
-
-    return dist.TCPStore("127.0.0.1", 0, is_master=True, wait_for_workers=False)
-
-
-def _stop(processes: Sequence[subprocess.Popen], grace_s: float = 10.0) -> None:
-    running = [process for process in processes if process.poll() is None]
-    for process in running:
-        process.terminate()
-    deadline = time.monotonic() + grace_s
-    for process in running:
-        try:
-            process.wait(timeout=max(0.0, deadline - time.monotonic()))
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
+        for name, value in before.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
 
 def _first_failure_first(ends: list[WorkerEnd]) -> list[WorkerEnd]:
     """A worker killed by a signal, then one that failed on its own, then one that lost the
-    others or was stopped, then the rest, each group in the order they ended."""
+    others or was stopped, then the rest, each group in the order given."""
 
     def kind(end: WorkerEnd) -> int:
         if end.returncode < 0 and end.returncode != -signal.SIGTERM:

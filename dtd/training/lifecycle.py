@@ -15,7 +15,7 @@ from dtd.errors import CheckpointError, ConfigError, RunDirError, WorkerLost
 from dtd.training.atomic import remove_stale_temporaries
 from dtd.training.checkpoint import Checkpoint, TrainState, restoring
 from dtd.training.components import Components, build, close_all, make_task_envs, resolved_threads
-from dtd.training.launch import launched_workers
+from dtd.training.launch import ALONE_HERE, JobPlace
 from dtd.training.progress import TrainingProgress
 from dtd.training.recorder import MetricsRecorder
 from dtd.training.run_dir import RunDir, read_config, write_config
@@ -67,6 +67,7 @@ def train(
     resume: Path | str | None = None,
     force: bool = False,
     show_progress: bool = True,
+    place: JobPlace = ALONE_HERE,
 ) -> TrainState:
     """Start a run in ``run_dir`` (default: runs/<env>-<algo>-s<seed>) or, with ``resume``,
     continue the run in that directory after its last finished epoch; train it to
@@ -74,27 +75,28 @@ def train(
 
     The run directory is held by this process while it trains (a second trainer is refused,
     :mod:`dtd.training.run_lock`); that it can be written is known before anything is built.
-    In a job of data-parallel workers (started by torchrun or ``dtd train --workers N``: the
-    environment names this process's rank), this process is one of them.
+    In a job of data-parallel workers (started by torchrun or ``dtd train --workers N``), this
+    process is the one at ``place`` (:meth:`JobPlace.from_environment`).
     """
     config, run = checked_start(config, run_dir, resume, force)
-    world = launched_workers()
     if resume is None and config.workers is None:
-        config = dataclasses.replace(config, workers=world or 1)  # under torchrun: the job's size
+        config = dataclasses.replace(config, workers=place.workers or 1)  # under torchrun: the job's size
     workers = (config.workers if resume is None else resumed_config(read_config(run), config).workers) or 1
-    if world is None and workers > 1:
+    if not place.in_job and workers > 1:
         raise ConfigError(
             f"a run of {workers} workers is started by dtd train --workers {workers} or by torchrun"
         )
-    group = join_group(workers) if world is not None else SOLO
+    group = join_group(workers, place) if place.in_job else SOLO
     try:
         # Every worker has looked at the run directory before any of them writes to it.
         group.barrier()
         with holding(run.root) if group.writes else contextlib.nullcontext():
             if resume is not None:
-                config, components, state = _resumed(run, config, group)
+                config, components, state = _resumed(run, config, group, place.local_workers)
             else:
-                components = build(config, worker=group.rank, collective=group.collective)
+                components = build(
+                    config, worker=group.rank, collective=group.collective, local_workers=place.local_workers
+                )
                 state = TrainState()
                 if force and group.writes:
                     run.clear()
@@ -137,7 +139,7 @@ def checked_start(
 
 
 def _resumed(
-    run: RunDir, given: TrainConfig, group: WorkerGroup = SOLO
+    run: RunDir, given: TrainConfig, group: WorkerGroup = SOLO, local_workers: int = 1
 ) -> tuple[TrainConfig, Components | None, TrainState]:
     """A stopped run's configuration (with the settings ``given`` may change), components and
     counters, restored from its last checkpoint (a data-parallel worker k > 0: from its shard
@@ -154,7 +156,7 @@ def _resumed(
             trained = latest.train_state()
         if trained.epoch >= config.epochs:
             return config, None, trained
-    components = build(config, worker=group.rank, collective=group.collective)
+    components = build(config, worker=group.rank, collective=group.collective, local_workers=local_workers)
     if latest is None:
         return config, components, TrainState()
     path = run.latest if group.writes else run.worker_shard(group.rank, trained.epoch)

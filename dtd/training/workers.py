@@ -18,7 +18,7 @@ import numpy as np
 
 from dtd.agents.collective import ALONE, Collective, ProcessGroup
 from dtd.errors import ConfigError, WorkerLost
-from dtd.training.launch import launched_workers
+from dtd.training.launch import JobPlace
 
 WORKER_TIMEOUT_S = 300.0
 """How long a worker waits for the others at any collective step before giving up (a worker
@@ -72,14 +72,14 @@ SOLO = WorkerGroup()
 """A run of one worker."""
 
 
-def join_group(workers: int) -> WorkerGroup:
-    """Join the job's process group (the environment names the rank and the rendezvous, as
-    torchrun sets them); a job of another size than ``workers`` is a :class:`ConfigError`."""
+def join_group(workers: int, place: JobPlace) -> WorkerGroup:
+    """Join the process group of the job ``place`` is in (torch.distributed reads the
+    rendezvous from the environment torchrun's agent set); a job of another size than
+    ``workers`` is a :class:`ConfigError`."""
     import torch.distributed as dist
 
-    world = launched_workers()
-    if world != workers:
-        raise ConfigError(f"the run has {workers} workers; this job started {world}")
+    if place.workers != workers:
+        raise ConfigError(f"the run has {workers} workers; this job started {place.workers}")
     if not dist.is_initialized():
         # Imported before the group exists: its functions take the world group as a default
         # argument, so imported after it (torch's optimisers import them on first use, through

@@ -15,7 +15,6 @@ import pytest
 import torch
 import torch.distributed as dist
 
-from dtd.training.launch import job_environment
 from tests.helpers import TINY, assert_same_figures, dtd, read_metrics
 
 pytestmark = pytest.mark.smoke
@@ -131,16 +130,66 @@ def test_a_killed_worker_stops_the_job_in_one_line_and_resume_finishes(tmp_path)
     ]
 
 
+@pytest.mark.parametrize("stop", ["ctrl-c", "sigterm"])
+def test_an_interrupted_job_stops_every_worker_in_one_line_and_resumes(tmp_path, stop):
+    run_dir = tmp_path / "run"
+    args = [
+        "--env",
+        "FetchReach-v4",
+        "--algo",
+        "her",
+        "--seed",
+        "4",
+        "--epochs",
+        "3",
+        *TINY,
+        "--workers",
+        "2",
+    ]
+    launcher = subprocess.Popen(
+        [sys.executable, "-m", "dtd", "train", *args, "--run-dir", str(run_dir)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # a terminal's Ctrl-C reaches its whole process group
+        # A test runner in the background may have left SIGINT ignored for its children.
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    deadline = time.monotonic() + 240
+    while not (run_dir / "metrics.csv").exists():  # an epoch finished
+        assert launcher.poll() is None, launcher.communicate()
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    workers = children(launcher.pid)
+    assert len(workers) == 2
+    if stop == "ctrl-c":
+        os.killpg(launcher.pid, signal.SIGINT)
+    else:
+        launcher.terminate()  # the launcher alone, as a scheduler stops a job
+    _, stderr = launcher.communicate(timeout=60)
+    assert launcher.returncode == 130, stderr
+    lines = [line for line in stderr.splitlines() if not line.startswith("epoch ")]  # progress
+    assert lines == [f"dtd: interrupted; continue with dtd train --resume {run_dir}"], stderr
+    for worker in workers:  # none left behind
+        assert (
+            not Path(f"/proc/{worker}").exists() or "Z" in Path(f"/proc/{worker}/stat").read_text().split()[2]
+        )
+    result = dtd("train", "--resume", run_dir)
+    assert result.returncode == 0, result.stderr
+    assert [int(row["epoch"]) for row in read_metrics(run_dir)] == [1, 2, 3]
+
+
 LEAVING_WORKER = """
 import os
 import torch
+from dtd.training.launch import JobPlace
 from dtd.training.workers import join_group, leave_group
 
 def gloo_threads():
     names = (open(f"/proc/self/task/{task}/comm").read().strip() for task in os.listdir("/proc/self/task"))
     return [name for name in names if "gloo" in name]
 
-group = join_group(2)
+group = join_group(2, JobPlace.from_environment())
 joined = len(gloo_threads())
 # A learner's optimiser, made once the group exists, imports torch._dynamo on first use.
 torch.optim.Adam([torch.nn.Parameter(torch.zeros(1))])
@@ -154,7 +203,16 @@ def test_a_worker_that_leaves_the_group_has_no_gloo_threads_left():
     # gloo threads still running when the interpreter exits can abort it (SIGABRT) after the
     # run has finished: leaving the group must end them.
     store = dist.TCPStore("127.0.0.1", 0, is_master=True, wait_for_workers=False)
-    job = job_environment(2, store.port, threads=1)
+    # What torchrun's agent sets for each worker of a one-machine job, less the rank, with the
+    # store held here, as the agent holds it.
+    job = {
+        "WORLD_SIZE": "2",
+        "LOCAL_WORLD_SIZE": "2",
+        "MASTER_ADDR": "127.0.0.1",
+        "MASTER_PORT": str(store.port),
+        "TORCHELASTIC_USE_AGENT_STORE": "True",
+        "OMP_NUM_THREADS": "1",
+    }
     workers = [
         subprocess.Popen(
             [sys.executable, "-c", LEAVING_WORKER],
