@@ -45,20 +45,24 @@ HIGH_LEVEL_HELP = {
 
 TARGET_ENTROPY_HINT = ("FLOAT", "(default: minus the action's dimension)")
 LEARNER_HINTS = {
+    "batch_size": ("INT", "(default: the algorithm's: 1024 for her and ddpg, 256 for dtd)"),
     "gamma": ("FLOAT", "(default: 1 - 1/T, T being the episode's length in steps)"),
     "target_entropy": TARGET_ENTROPY_HINT,
 }
 HIGH_LEVEL_HINTS = {
+    "batch_size": ("INT", None),
     "gamma": ("FLOAT", "(default: the low level's discount to the power of a segment's steps)"),
     "target_entropy": ("FLOAT", "(default: minus the goal's dimension)"),
 }
 """Metavar and hint of the learners' settings whose default (None) says nothing."""
 
 ENV_KWARGS_HINT = ("KEY=VALUE ...", "(default: none: the registered defaults)")
-REQUIRED_ENV = {"env": ("ID", "(required)"), "env_kwargs": ENV_KWARGS_HINT}
+N_STEP_HINT = ("INT", "(default: the algorithm's: 3 for dtd, 1 for her and ddpg)")
+REQUIRED_ENV = {"env": ("ID", "(required)"), "env_kwargs": ENV_KWARGS_HINT, "n_step": N_STEP_HINT}
 REQUIRED_ENV_UNLESS_RESUMED = {
     "env": ("ID", "(required, unless --resume)"),
     "env_kwargs": ENV_KWARGS_HINT,
+    "n_step": N_STEP_HINT,
     "workers": ("INT", "(default: 1; resumed: the run's own)"),
 }
 """Metavar and hint (shown where the default would be) of options whose default says nothing."""

@@ -9,7 +9,7 @@ import sys
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import tyro
 
@@ -17,6 +17,9 @@ from dtd.cli.options import optional
 from dtd.config import TrainConfig
 from dtd.errors import DtdError
 from dtd.training.launch import ALONE_HERE, JobPlace
+
+if TYPE_CHECKING:
+    from dtd.training.lifecycle import StartPlan
 
 
 def train(
@@ -51,18 +54,14 @@ def train(
         place: This process's place in a job of workers (the command line reads it).
         invocation: The command's arguments, which the workers started here are given.
     """
-    if not place.in_job:
-        workers = _workers_of(config, resume)
-        if workers > 1:
-            _launch_workers(config, run_dir, resume, force, workers, oversubscribe, invocation)
-            return
-    from dtd.training.lifecycle import epochs_recorded
-    from dtd.training.lifecycle import train as train_run
+    from dtd.training.lifecycle import epochs_recorded, plan_start, train_planned
 
-    before = epochs_recorded(resume) if resume is not None else 0
-    state = train_run(
-        config, run_dir=run_dir, resume=resume, force=force, show_progress=progress, place=place
-    )
+    plan = plan_start(config, run_dir, resume, force, place)
+    if not place.in_job and plan.workers > 1:
+        _launch_workers(plan, oversubscribe, invocation)
+        return
+    before = epochs_recorded(plan.run.root) if plan.resuming else 0
+    state = train_planned(plan, show_progress=progress, place=place)
     if not place.reports:
         return  # worker 0 reports for the job
     if resume is not None and state.epoch <= before:
@@ -85,33 +84,13 @@ def train(
     )
 
 
-def _workers_of(config: TrainConfig, resume: Path | None) -> int:
-    """The workers of the run to start (--workers, else 1) or to resume (as it was started; a
-    --workers that differs is refused)."""
-    if resume is None:
-        return config.workers or 1
-    from dtd.training.lifecycle import resumed_config
-    from dtd.training.run_dir import RunDir, read_config
-
-    return resumed_config(read_config(RunDir(resume)), config).workers or 1
-
-
-def _launch_workers(
-    config: TrainConfig,
-    run_dir: Path | None,
-    resume: Path | None,
-    force: bool,
-    workers: int,
-    oversubscribe: bool,
-    invocation: tuple[str, ...],
-) -> None:
-    """Check the run, start its workers here, and report how the job ended in one line."""
+def _launch_workers(plan: StartPlan, oversubscribe: bool, invocation: tuple[str, ...]) -> None:
+    """Start the planned run's workers here, and report how the job ended in one line."""
     from dtd.errors import ConfigError, MachineError
     from dtd.training.components import usable_cores
     from dtd.training.launch import INTERRUPTED_EXIT, LOST_WORKER_EXIT, launch_local
-    from dtd.training.lifecycle import checked_start
 
-    _, run = checked_start(config, run_dir, resume, force)
+    run, workers = plan.run, plan.workers
     cores = usable_cores()
     if workers > cores and not oversubscribe:
         raise ConfigError(

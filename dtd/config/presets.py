@@ -20,12 +20,13 @@ from dtd.errors import ConfigError
 
 
 def with_algorithm_defaults(config: TrainConfig) -> TrainConfig:
-    """``config`` with a low-level batch of 0 and an n-step of 0 replaced by its algorithm's
-    (``LOW_LEVEL_BATCH``, ``LOW_LEVEL_N_STEP``)."""
-    if not config.learner.batch_size:
+    """The settings training uses: ``config`` with an unset low-level batch and n-step made its
+    algorithm's (``LOW_LEVEL_BATCH``, ``LOW_LEVEL_N_STEP``). A run records its settings as
+    given, and these among the facts derived from them."""
+    if config.learner.batch_size is None:
         learner = dataclasses.replace(config.learner, batch_size=LOW_LEVEL_BATCH[config.algo])
         config = dataclasses.replace(config, learner=learner)
-    if not config.n_step:
+    if config.n_step is None:
         config = dataclasses.replace(config, n_step=LOW_LEVEL_N_STEP[config.algo])
     return config
 

@@ -121,9 +121,8 @@ class LearnerConfig:
     """Adam learning rate of the actor."""
     critic_lr: float = 1e-3
     """Adam learning rate of the critic."""
-    batch_size: int = 256
-    """Transitions per update; 0 (the default of her, ddpg and dtd's low level): the
-    algorithm's, 1024 for her and ddpg, 256 for dtd."""
+    batch_size: int | None = 256
+    """Transitions per update; unset (the low level's default): the algorithm's."""
     polyak: float = 0.95
     """Polyak coefficient of the target networks: target <- polyak * target + (1 - polyak) * online."""
     action_l2: float = 1.0
@@ -185,7 +184,7 @@ SETTINGS_BEFORE_THEIR_KEY = {"n_step": 1, "explore_snapshots": 0}
 """Settings whose default changed after runs were written without them: a ``config.json``
 without the key was written when the run used this value."""
 
-LOW_LEVEL_DEFAULTS = LearnerConfig(batch_size=0)
+LOW_LEVEL_DEFAULTS = LearnerConfig(batch_size=None)
 """The learner of ``her``, ``ddpg`` and dtd's low level: the reference settings but the batch,
 which depends on the algorithm (``LOW_LEVEL_BATCH``)."""
 
@@ -290,10 +289,9 @@ class TrainConfig:
     past_goal_share: float = 0.0
     """HER: share of the relabelled goals that are goals given before (of a random stored
     step, any episode) instead of goals achieved later in the episode."""
-    n_step: int = 0
+    n_step: int | None = None
     """Rewards summed per sampled transition before bootstrapping (n-step returns; dtd: the
-    low level's), cut at the episode's end; 1 is one-step DDPG; 0: the algorithm's (dtd 3, her
-    and ddpg 1)."""
+    low level's), cut at the episode's end; 1 is one-step DDPG; unset: the algorithm's."""
     noise_eps: float = 0.2
     """Exploration: std of Gaussian action noise, as a fraction of the largest action."""
     random_eps: float = 0.3
@@ -339,8 +337,17 @@ class TrainConfig:
         :class:`ConfigError` naming the setting, missing keys take defaults (those of
         :data:`SETTINGS_BEFORE_THEIR_KEY` their value from before the key existed)."""
         if isinstance(data, dict):
-            data = _grouped({**SETTINGS_BEFORE_THEIR_KEY, **data})
+            data = _grouped(_unset_zeros({**SETTINGS_BEFORE_THEIR_KEY, **data}))
         return cls(**_typed_fields(cls, data, ""))
+
+
+def _unset_zeros(data: dict[str, Any]) -> dict[str, Any]:
+    """Configuration data with the algorithm's batch and n-step unset where an earlier dtd wrote
+    0 for them."""
+    learner = data.get("learner")
+    if isinstance(learner, dict) and learner.get("batch_size") == 0:
+        data = {**data, "learner": {**learner, "batch_size": None}}
+    return {**data, "n_step": None} if data.get("n_step") == 0 else data
 
 
 DOT_TO_DOT_FIELDS = tuple(field.name for field in dataclasses.fields(DotToDotConfig))

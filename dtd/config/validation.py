@@ -75,7 +75,10 @@ def validate(config: TrainConfig) -> None:
             _positive(config.dtd.subgoal_max_distance),
             f"--subgoal-max-distance must be > 0, got {config.dtd.subgoal_max_distance}",
         ),
-        (config.n_step >= 0, f"--n-step must be 0 (the algorithm's) or more, got {config.n_step}"),
+        (
+            config.n_step is None or config.n_step >= 1,
+            f"--n-step must be at least 1 (left out: the algorithm's), got {config.n_step}",
+        ),
         (config.dtd.high_replay_k >= 0, f"--high-replay-k must be 0 or more, got {config.dtd.high_replay_k}"),
         (
             config.dtd.high_updates_per_cycle >= 1,
@@ -87,14 +90,17 @@ def validate(config: TrainConfig) -> None:
         ),
     ]
     # The low level's batch may be 0: the algorithm's (LOW_LEVEL_BATCH).
-    checks += _learner_checks(config.learner, "--", smallest_batch=0)
-    checks += _learner_checks(config.dtd.high, "--high.", smallest_batch=1)
+    checks += _learner_checks(config.learner, "--", may_be_unset=True)
+    checks += _learner_checks(config.dtd.high, "--high.", may_be_unset=False)
     for ok, message in checks:
         if not ok:
             raise ConfigError(message)
 
 
-def _learner_checks(learner: LearnerConfig, prefix: str, smallest_batch: int) -> list[tuple[bool, str]]:
+def _learner_checks(learner: LearnerConfig, prefix: str, may_be_unset: bool) -> list[tuple[bool, str]]:
+    """The checks of one learner's settings; the low level's batch ``may_be_unset`` (the
+    algorithm's)."""
+    unset = " (left out: the algorithm's)" if may_be_unset else ""
     return [
         (
             len(learner.hidden_sizes) >= 1 and all(h >= 1 for h in learner.hidden_sizes),
@@ -103,8 +109,8 @@ def _learner_checks(learner: LearnerConfig, prefix: str, smallest_batch: int) ->
         (_positive(learner.actor_lr), f"{prefix}actor-lr must be > 0, got {learner.actor_lr}"),
         (_positive(learner.critic_lr), f"{prefix}critic-lr must be > 0, got {learner.critic_lr}"),
         (
-            learner.batch_size >= smallest_batch,
-            f"{prefix}batch-size must be at least {smallest_batch}, got {learner.batch_size}",
+            (learner.batch_size is None and may_be_unset) or (learner.batch_size or 0) >= 1,
+            f"{prefix}batch-size must be at least 1{unset}, got {learner.batch_size}",
         ),
         (_finite_in(learner.polyak, 0, 1), f"{prefix}polyak must lie in [0, 1], got {learner.polyak}"),
         (

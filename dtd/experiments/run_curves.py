@@ -9,7 +9,7 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from dtd.config import Collection, Preset, TrainConfig, flat_items
+from dtd.config import Collection, Preset, TrainConfig, flat_items, with_algorithm_defaults
 from dtd.errors import ConfigError, RunDirError
 from dtd.experiments.curves import Curve, read_curve
 from dtd.training.run_dir import RunDir, read_config
@@ -92,7 +92,9 @@ def find_runs(directories: Sequence[Path]) -> list[RunCurve]:
         if len(curve) == 0:
             continue
         run = RunCurve(run_dir, config.env or "?", config.algo.value, curve, config.test_episodes)
-        trial = dataclasses.replace(config, epochs=0, collector=Collection.auto)
+        # What the algorithm chose counts as given: runs that recorded it and runs that left it
+        # to the algorithm are the same trial.
+        trial = dataclasses.replace(with_algorithm_defaults(config), epochs=0, collector=Collection.auto)
         if trial in trials:
             kept, dropped = sorted([trials[trial], run], key=lambda r: len(r.curve), reverse=True)
             warnings.warn(
@@ -120,7 +122,11 @@ def setting_labels(configs: Sequence[TrainConfig]) -> list[str]:
     the settings in which it differs from the others of its task, algorithm and preset, as
     ``name=value`` in option names (``learner=tqc high.learner=tqc``)."""
     flats = [
-        {name: value for name, value in flat_items(config).items() if name not in LABEL_IGNORES}
+        {
+            name: value
+            for name, value in flat_items(with_algorithm_defaults(config)).items()
+            if name not in LABEL_IGNORES
+        }
         for config in configs
     ]
     kin: dict[tuple[str, str, str], list[int]] = {}

@@ -38,7 +38,8 @@ def resumed_config(stored: TrainConfig, given: TrainConfig) -> TrainConfig:
     """The stored configuration, with the settings the user changed on the command line.
 
     A setting counts as given when it differs from the default of the preset given; only
-    RESUMABLE_SETTINGS may differ from the stored run.
+    RESUMABLE_SETTINGS may differ from the stored run (a batch or n-step the run left to its
+    algorithm may be given as what the algorithm chose).
     """
     if given.preset is not Preset.tuned and given.preset is not stored.preset:
         raise ConfigError(
@@ -47,18 +48,82 @@ def resumed_config(stored: TrainConfig, given: TrainConfig) -> TrainConfig:
         )
     defaults = flat_items(preset_config(given.preset))
     stored_flat, given_flat = flat_items(stored), flat_items(given)
+    chosen = flat_items(with_algorithm_defaults(stored))
     changes: dict[str, Any] = {}
     for name, value in given_flat.items():
-        if value == defaults[name] or value == stored_flat[name]:
+        if value in (defaults[name], stored_flat[name], chosen[name]):
             continue
         if name not in RESUMABLE_SETTINGS:
             raise ConfigError(
                 f"--{name.replace('_', '-')} cannot change when resuming "
-                f"(the run has {stored_flat[name]!r}); only {_RESUMABLE_FLAGS} can"
+                f"(the run has {chosen[name]!r}); only {_RESUMABLE_FLAGS} can"
             )
         changes[name] = value
     # Typed as config.json is read (the flat values are plain: an enum's is its text).
     return TrainConfig.from_dict({**stored.to_dict(), **changes})
+
+
+@dataclasses.dataclass(frozen=True)
+class StartPlan:
+    """What :func:`train` starts or resumes, resolved once before anything is built."""
+
+    config: TrainConfig
+    """The settings as the run records them: as given for a new run (its thread count and
+    workers made concrete), a resumed run's own with the changes it allows."""
+    run: RunDir
+    resuming: bool
+    force: bool = False
+    """Replace a run already in ``run``."""
+
+    @property
+    def settings(self) -> TrainConfig:
+        """The settings training uses: ``config`` with what its algorithm chooses where it is
+        unset (the low level's batch, the n-step); derived, never recorded as settings."""
+        return with_algorithm_defaults(self.config)
+
+    @property
+    def workers(self) -> int:
+        return self.config.workers or 1
+
+    def derived(self, spec: EnvSpec) -> dict[str, Any]:
+        """What follows from the settings and the task, as config.json records it beside them."""
+        settings = self.settings
+        return {
+            "spec": dataclasses.asdict(spec),
+            "batch_size": settings.learner.batch_size,
+            "n_step": settings.n_step,
+        }
+
+
+def plan_start(
+    config: TrainConfig,
+    run_dir: Path | str | None = None,
+    resume: Path | str | None = None,
+    force: bool = False,
+    place: JobPlace = ALONE_HERE,
+) -> StartPlan:
+    """What :func:`train` would start or resume, checked before anything is built: the
+    settings (a resumed run's read from its directory once) and the run directory; a
+    :class:`ConfigError` or :class:`RunDirError` where it cannot."""
+    if resume is not None:
+        if run_dir is not None and Path(run_dir).resolve() != Path(resume).resolve():
+            raise ConfigError("give the run directory once: --resume DIR (without --run-dir)")
+        run = RunDir(Path(resume))
+        resumed = resumed_config(read_config(run), config)  # a missing or unreadable run is refused here
+        resumed.validate()
+        return StartPlan(resumed, run, resuming=True)
+    config.validate()
+    # The thread count is part of what makes a run repeatable: the run records it. Under
+    # torchrun the workers are the job's size.
+    config = dataclasses.replace(
+        config, threads=resolved_threads(config.threads), workers=config.workers or place.workers or 1
+    )
+    run = RunDir(Path(run_dir) if run_dir is not None else default_run_dir(config))
+    if run.holds_run() and not force:
+        raise RunDirError(
+            f"{run.root} already holds a run; continue it with --resume {run.root} or replace it with --force"
+        )
+    return StartPlan(config, run, resuming=False, force=force)
 
 
 def train(
@@ -78,31 +143,25 @@ def train(
     In a job of data-parallel workers (started by torchrun or ``dtd train --workers N``), this
     process is the one at ``place`` (:meth:`JobPlace.from_environment`).
     """
-    config, run = checked_start(config, run_dir, resume, force)
-    if resume is None and config.workers is None:
-        config = dataclasses.replace(config, workers=place.workers or 1)  # under torchrun: the job's size
-    workers = (config.workers if resume is None else resumed_config(read_config(run), config).workers) or 1
-    if not place.in_job and workers > 1:
+    return train_planned(plan_start(config, run_dir, resume, force, place), show_progress, place)
+
+
+def train_planned(plan: StartPlan, show_progress: bool = True, place: JobPlace = ALONE_HERE) -> TrainState:
+    """Carry out ``plan`` (:func:`plan_start`) as the process at ``place``."""
+    if not place.in_job and plan.workers > 1:
         raise ConfigError(
-            f"a run of {workers} workers is started by dtd train --workers {workers} or by torchrun"
+            f"a run of {plan.workers} workers is started by dtd train --workers {plan.workers} or by torchrun"
         )
-    group = join_group(workers, place) if place.in_job else SOLO
+    group = join_group(plan.workers, place) if place.in_job else SOLO
+    run = plan.run
     try:
         # Every worker has looked at the run directory before any of them writes to it.
         group.barrier()
         with holding(run.root) if group.writes else contextlib.nullcontext():
-            if resume is not None:
-                config, components, state = _resumed(run, config, group, place.local_workers)
-            else:
-                components = build(
-                    config, worker=group.rank, collective=group.collective, local_workers=place.local_workers
-                )
-                state = TrainState()
-                if force and group.writes:
-                    run.clear()
+            components, state = _started(plan, group, place.local_workers)
             # A run trained to its end already has no components: nothing is built or written.
             if components is not None:
-                state = _train_started(run, config, components, state, show_progress, group)
+                state = _train_started(plan, components, state, show_progress, group)
             group.barrier()  # every worker is done before any leaves the group
             return state
     except (KeyboardInterrupt, WorkerLost) as stop:
@@ -113,40 +172,22 @@ def train(
             leave_group()
 
 
-def checked_start(
-    config: TrainConfig, run_dir: Path | str | None, resume: Path | str | None, force: bool
-) -> tuple[TrainConfig, RunDir]:
-    """What :func:`train` would start or resume, checked before anything is built: the
-    configuration (for a new run, with its thread count, batch and n-step made concrete) and
-    the run directory; a :class:`ConfigError` or :class:`RunDirError` where it cannot."""
-    if resume is not None:
-        if run_dir is not None and Path(run_dir).resolve() != Path(resume).resolve():
-            raise ConfigError("give the run directory once: --resume DIR (without --run-dir)")
-        run = RunDir(Path(resume))
-        resumed_config(read_config(run), config)  # a missing or unreadable run is refused here
-        return config, run
-    config.validate()
-    # The thread count is part of what makes a run repeatable: the run records it, and the
-    # batch and n-step its algorithm chose.
-    config = dataclasses.replace(config, threads=resolved_threads(config.threads))
-    config = with_algorithm_defaults(config)
-    run = RunDir(Path(run_dir) if run_dir is not None else default_run_dir(config))
-    if run.holds_run() and not force:
-        raise RunDirError(
-            f"{run.root} already holds a run; continue it with --resume {run.root} or replace it with --force"
-        )
-    return config, run
+def _started(
+    plan: StartPlan, group: WorkerGroup = SOLO, local_workers: int = 1
+) -> tuple[Components | None, TrainState]:
+    """The run's components and counters: fresh for a new run, restored from a stopped run's
+    last checkpoint (a data-parallel worker k > 0: from its shard of the epoch that checkpoint
+    holds); no components when the run has already trained ``config.epochs`` epochs."""
+    run, settings = plan.run, plan.settings
 
+    def built() -> Components:
+        return build(settings, worker=group.rank, collective=group.collective, local_workers=local_workers)
 
-def _resumed(
-    run: RunDir, given: TrainConfig, group: WorkerGroup = SOLO, local_workers: int = 1
-) -> tuple[TrainConfig, Components | None, TrainState]:
-    """A stopped run's configuration (with the settings ``given`` may change), components and
-    counters, restored from its last checkpoint (a data-parallel worker k > 0: from its shard
-    of the epoch that checkpoint holds); no components when the run has already trained
-    ``config.epochs`` epochs."""
-    config = resumed_config(read_config(run), given)
-    config.validate()
+    if not plan.resuming:
+        components = built()
+        if plan.force and group.writes:
+            run.clear()
+        return components, TrainState()
     if group.writes:
         remove_stale_temporaries(run.root)  # half-written files of the process that was killed
     # A run killed during its first epoch has no checkpoint yet: it starts again.
@@ -154,27 +195,26 @@ def _resumed(
     if latest is not None:
         with restoring(run.latest):
             trained = latest.train_state()
-        if trained.epoch >= config.epochs:
-            return config, None, trained
-    components = build(config, worker=group.rank, collective=group.collective, local_workers=local_workers)
+        if trained.epoch >= settings.epochs:
+            return None, trained
+    components = built()
     if latest is None:
-        return config, components, TrainState()
+        return components, TrainState()
     path = run.latest if group.writes else run.worker_shard(group.rank, trained.epoch)
     try:
         checkpoint = latest if group.writes else Checkpoint.read(path)
-        checkpoint.check_fits(config, components.spec, path)
+        checkpoint.check_fits(settings, components.spec, path)
         state = restore(
             checkpoint, components.agent, components.rng, components.collector, components.eval_envs, path
         )
     except CheckpointError:
         close_all(components)
         raise
-    return config, components, state
+    return components, state
 
 
 def _train_started(
-    run: RunDir,
-    config: TrainConfig,
+    plan: StartPlan,
     components: Components,
     state: TrainState,
     show_progress: bool,
@@ -182,9 +222,10 @@ def _train_started(
 ) -> TrainState:
     """Record the configuration, then train from ``state`` to ``config.epochs`` (worker 0 of
     data-parallel workers records and shows progress; the others only train)."""
+    run, config = plan.run, plan.settings
     recorder = None
     if group.writes:
-        write_config(run, config, {"spec": dataclasses.asdict(components.spec)})
+        write_config(run, plan.config, plan.derived(components.spec))
         # TensorBoard events past the checkpoint came from an epoch that did not finish.
         recorder = MetricsRecorder(run, resume_step=state.env_steps + 1 if state.epoch else 0)
     total_steps = (

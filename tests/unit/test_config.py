@@ -27,7 +27,7 @@ def test_defaults_are_the_reference_settings_but_where_tuned():
     assert (c.n_cycles, c.episodes_per_cycle, c.updates_per_cycle, c.test_episodes) == (50, 2, 40, 10)
     assert (c.buffer_size, c.replay_k, c.noise_eps, c.random_eps) == (1_000_000, 4, 0.2, 0.3)
     learner = c.learner
-    assert learner.hidden_sizes == (256, 256, 256) and learner.batch_size == 0  # the algorithm's
+    assert learner.hidden_sizes == (256, 256, 256) and learner.batch_size is None  # the algorithm's
     assert c.dtd.high.batch_size == 256
     assert (learner.actor_lr, learner.critic_lr, learner.polyak, learner.action_l2) == (1e-3, 1e-3, 0.95, 1.0)
     assert (learner.norm_clip, learner.obs_clip, learner.norm_eps) == (5.0, 200.0, 0.01)
@@ -67,11 +67,19 @@ def test_n_step_is_the_algorithms_unless_given_and_one_for_runs_written_before_i
     assert with_algorithm_defaults(TrainConfig(algo=Algo.dtd, n_step=5)).n_step == 5
     assert with_algorithm_defaults(preset_config(Preset.paper, algo=Algo.dtd)).n_step == 1
     written = TrainConfig(algo=Algo.dtd).to_dict()
-    assert TrainConfig.from_dict(written).n_step == 0
+    assert written["n_step"] is None and TrainConfig.from_dict(written).n_step is None
+    # An earlier dtd wrote 0 for "the algorithm's".
+    assert TrainConfig.from_dict({**written, "n_step": 0}).n_step is None
+    old_learner = {**written["learner"], "batch_size": 0}
+    assert TrainConfig.from_dict({**written, "learner": old_learner}).learner.batch_size is None
     del written["n_step"]  # a config.json from before the setting existed
     assert TrainConfig.from_dict(written).n_step == 1
-    with pytest.raises(ConfigError, match="--batch-size must be at least 0"):
-        dataclasses.replace(VALID, learner=LearnerConfig(batch_size=-1)).validate()
+    with pytest.raises(ConfigError, match=r"--batch-size must be at least 1 \(left out: the algorithm's\)"):
+        dataclasses.replace(VALID, learner=LearnerConfig(batch_size=0)).validate()
+    with pytest.raises(ConfigError, match=r"--n-step must be at least 1 \(left out"):
+        dataclasses.replace(VALID, n_step=0).validate()
+    with pytest.raises(ConfigError, match=r"--high\.batch-size must be at least 1, got None"):
+        dataclasses.replace(VALID, dtd=DotToDotConfig(high=LearnerConfig(batch_size=None))).validate()
     with pytest.raises(ConfigError, match=r"--high\.batch-size must be at least 1"):
         dataclasses.replace(VALID, dtd=DotToDotConfig(high=LearnerConfig(batch_size=0))).validate()
 
@@ -133,7 +141,7 @@ def test_stored_values_take_their_types():
     config = TrainConfig.from_dict({"noise_eps": 1, "learner": {"hidden_sizes": [64, 64], "gamma": None}})
     assert config.noise_eps == 1.0 and isinstance(config.noise_eps, float)
     assert config.learner.hidden_sizes == (64, 64) and config.learner.gamma is None
-    assert config.learner.batch_size == 0 and config.dtd.high.batch_size == 256  # each level's defaults
+    assert config.learner.batch_size is None and config.dtd.high.batch_size == 256  # each level's defaults
 
 
 def test_dot_to_dots_settings_are_one_group_read_also_from_runs_written_flat():

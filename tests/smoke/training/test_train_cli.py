@@ -141,19 +141,29 @@ def test_the_paper_preset_gives_the_defaults_and_options_beside_it_win(tmp_path)
     assert config["dtd"]["high_updates_per_cycle"] == 40 and config["updates_per_cycle"] == 5
 
 
-def test_a_run_records_the_batch_its_algorithm_chose(tmp_path):
+def test_a_run_records_the_batch_its_algorithm_chose_beside_its_settings(tmp_path):
     at = TINY.index("--batch-size")
     small = [*TINY[:at], *TINY[at + 2 :], "--epochs", "1"]
-    for algo, batch in (("dtd", 256), ("her", 1024)):
+    for algo, batch, n_step in (("dtd", 256, 3), ("her", 1024, 1)):
         run_dir = tmp_path / algo
         result = dtd("train", "--env", "FetchReach-v4", "--algo", algo, *small, "--run-dir", run_dir)
         assert result.returncode == 0, result.stderr
-        config = json.loads((run_dir / "config.json").read_text())["config"]
-        assert config["learner"]["batch_size"] == batch
-        # Resuming with the default (0) keeps the recorded batch.
-        result = dtd("train", "--resume", run_dir, "--epochs", "2", "--no-progress")
-        assert result.returncode == 0, result.stderr
-        assert json.loads((run_dir / "config.json").read_text())["config"]["learner"]["batch_size"] == batch
+        written = json.loads((run_dir / "config.json").read_text())
+        # The settings as given (left to the algorithm), what it chose among the derived facts.
+        assert written["config"]["learner"]["batch_size"] is None and written["config"]["n_step"] is None
+        assert (written["derived"]["batch_size"], written["derived"]["n_step"]) == (batch, n_step)
+        # Resuming with the default, or with what the algorithm chose, keeps them.
+        for given in ([], ["--batch-size", str(batch), "--n-step", str(n_step)]):
+            result = dtd("train", "--resume", run_dir, "--epochs", "2", "--no-progress", *given)
+            assert result.returncode == 0, result.stderr
+            now = json.loads((run_dir / "config.json").read_text())
+            assert now["derived"] == written["derived"]
+            assert now["config"] == written["config"] | {"epochs": 2}
+        result = dtd("train", "--resume", run_dir, "--epochs", "3", "--batch-size", "64")
+        assert (
+            result.returncode == 2
+            and f"--batch-size cannot change when resuming (the run has {batch})" in (result.stderr)
+        )
 
 
 def test_collecting_after_the_updates_is_the_same_inline_or_in_a_process(reach_run, tmp_path):

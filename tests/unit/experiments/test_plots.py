@@ -3,11 +3,12 @@
 import csv
 import json
 import re
+import warnings
 
 import numpy as np
 import pytest
 
-from dtd.config import Algo, Preset, TrainConfig, with_settings
+from dtd.config import Algo, Preset, TrainConfig, with_algorithm_defaults, with_settings
 from dtd.errors import ConfigError, RunDirError
 from dtd.experiments.curves import Curve, band, quantile
 from dtd.experiments.plots import plot
@@ -212,3 +213,18 @@ def test_a_grids_trials_are_grouped_and_labelled_by_the_settings_in_which_they_d
     assert rows == {"dtd learner=ddpg": 2, "dtd learner=tqc": 2, "her": 1}
     plot([tmp_path], tmp_path / "figures")
     assert (tmp_path / "figures" / "FetchPush-v4.png").is_file()
+
+
+def test_runs_that_recorded_their_algorithms_batch_and_runs_that_left_it_unset_are_one_group(tmp_path):
+    for seed, recorded in ((0, True), (1, False)):
+        run = RunDir(tmp_path / f"FetchPush-v4-her-s{seed}")
+        run.root.mkdir(parents=True)
+        config = TrainConfig(env="FetchPush-v4", algo=Algo.her, seed=seed)
+        if recorded:  # as runs were written before the batch and n-step stayed unset
+            config = with_algorithm_defaults(config)
+        write_config(run, config, {})
+        run.metrics.write_text("epoch,env_steps,wall_s,eval_success,train_success\n1,1000,10.0,0.5,0.0\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # neither is taken for a repeat of the other
+        rows = {row.label: row.runs for row in summaries(find_runs([tmp_path]))}
+    assert rows == {"her": 2}
