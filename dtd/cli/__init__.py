@@ -9,7 +9,7 @@ from __future__ import annotations
 import sys
 
 from dtd.cli.explaining import evaluate, explore, export, heatmap, render, report
-from dtd.cli.options import REQUIRED_ENV_UNLESS_RESUMED, deferred, options_class, parse_command
+from dtd.cli.options import REQUIRED_ENV_UNLESS_RESUMED, deferred, parse_command, settings_registry
 from dtd.cli.training import plot, sweep, train
 from dtd.config import Preset, preset_config
 from dtd.errors import DtdError, MachineError, WorkerLost
@@ -39,10 +39,9 @@ def main(argv: list[str] | None = None) -> None:
     place = JobPlace.from_environment()
     # The preset supplies the defaults the other options override, so it is read first.
     preset = preset_config(preset_named(args))
-    train_options = options_class(preset, hints=REQUIRED_ENV_UNLESS_RESUMED)
     commands = {
-        "train": deferred(train, train_options, bound={"place": place, "invocation": tuple(args)}),
-        "sweep": deferred(sweep, options_class(preset, omit=frozenset({"algo", "workers"}))),
+        "train": deferred(train, preset, bound={"place": place, "invocation": tuple(args)}),
+        "sweep": deferred(sweep, preset),
         "plot": deferred(plot),
         "eval": deferred(evaluate),
         "render": deferred(render),
@@ -59,7 +58,11 @@ def main(argv: list[str] | None = None) -> None:
                 "dtd sweep takes --parallel N (trials at once), not --workers (dtd train's "
                 "data-parallel workers of one run)"
             )
-        command = parse_command(commands, DESCRIPTION, args)
+        registries = {
+            "train": settings_registry(hints=REQUIRED_ENV_UNLESS_RESUMED),
+            "sweep": settings_registry(omit=frozenset({"algo", "workers"})),
+        }
+        command = parse_command(commands, DESCRIPTION, args, registries)
         command()
     except DtdError as exc:
         print(f"dtd: error: {exc}", file=sys.stderr)

@@ -1,30 +1,29 @@
 """The settings of a run as command-line options, and the parsing of a command line.
 
-tyro reads :class:`TrainConfig`'s field docstrings as help text but keeps their source line
-breaks, and knows nothing of a setting that is required only when starting a run. So each
-command gets a view of the configuration built here: the same fields and defaults (those of
-the preset given), each with its docstring as whole sentences and one default, ``--env``
-marked as required, and fields a command does not take (``--algo`` for ``dtd sweep``) left
-out. A parse error becomes one line.
+tyro builds the options from :class:`TrainConfig` itself; a rule in a tyro constructor registry
+(:func:`settings_registry`) tells it, per command, each setting's help (its docstring read as
+tyro reads docstrings, in whole sentences), the metavar and hint of the settings whose default
+says nothing (``--env`` required, ``--high.gamma``'s default), the settings the command does not
+take (``--algo`` for ``dtd sweep``), and the defaults of the preset given. A parse error
+becomes one line.
 """
 
 from __future__ import annotations
 
-import ast
 import contextlib
 import dataclasses
 import functools
 import inspect
 import io
-import itertools
 import re
 import sys
-import textwrap
 import typing
 from collections.abc import Callable, Mapping
 from typing import Annotated, Any
 
+import docstring_parser
 import tyro
+from tyro.constructors import ConstructorRegistry, StructConstructorSpec, StructFieldSpec, StructTypeInfo
 
 from dtd.config import DotToDotConfig, LearnerConfig, TrainConfig
 from dtd.errors import DtdError
@@ -37,53 +36,89 @@ def optional(metavar: str, default: str) -> Any:
     return tyro.conf.arg(metavar=metavar, help_behavior_hint=f"(default: {default})")
 
 
+Hints = Mapping[str, tuple[str, str | None]]
+"""Metavar and hint (shown where the default would be) of options whose default says nothing."""
+
+LEARNER_HINTS: Hints = {
+    "batch_size": ("INT", "(default: the algorithm's: 1024 for her and ddpg, 256 for dtd)"),
+    "gamma": ("FLOAT", "(default: 1 - 1/T, T being the episode's length in steps)"),
+    "target_entropy": ("FLOAT", "(default: minus the action's dimension)"),
+}
+HIGH_LEVEL_HINTS: Hints = {
+    "batch_size": ("INT", None),
+    "gamma": ("FLOAT", "(default: the low level's discount to the power of a segment's steps)"),
+    "target_entropy": ("FLOAT", "(default: minus the goal's dimension)"),
+}
 HIGH_LEVEL_HELP = {
     "batch_size": "Transitions per update of the high level's learner.",
     "gamma": "Discount of the high level per segment.",
 }
 """Help of the high level's settings where the low level's docstring would mislead."""
 
-TARGET_ENTROPY_HINT = ("FLOAT", "(default: minus the action's dimension)")
-LEARNER_HINTS = {
-    "batch_size": ("INT", "(default: the algorithm's: 1024 for her and ddpg, 256 for dtd)"),
-    "gamma": ("FLOAT", "(default: 1 - 1/T, T being the episode's length in steps)"),
-    "target_entropy": TARGET_ENTROPY_HINT,
-}
-HIGH_LEVEL_HINTS = {
-    "batch_size": ("INT", None),
-    "gamma": ("FLOAT", "(default: the low level's discount to the power of a segment's steps)"),
-    "target_entropy": ("FLOAT", "(default: minus the goal's dimension)"),
-}
-"""Metavar and hint of the learners' settings whose default (None) says nothing."""
-
 ENV_KWARGS_HINT = ("KEY=VALUE ...", "(default: none: the registered defaults)")
 N_STEP_HINT = ("INT", "(default: the algorithm's: 3 for dtd, 1 for her and ddpg)")
-REQUIRED_ENV = {"env": ("ID", "(required)"), "env_kwargs": ENV_KWARGS_HINT, "n_step": N_STEP_HINT}
-REQUIRED_ENV_UNLESS_RESUMED = {
+REQUIRED_ENV: Hints = {"env": ("ID", "(required)"), "env_kwargs": ENV_KWARGS_HINT, "n_step": N_STEP_HINT}
+REQUIRED_ENV_UNLESS_RESUMED: Hints = {
+    **REQUIRED_ENV,
     "env": ("ID", "(required, unless --resume)"),
-    "env_kwargs": ENV_KWARGS_HINT,
-    "n_step": N_STEP_HINT,
     "workers": ("INT", "(default: 1; resumed: the run's own)"),
 }
-"""Metavar and hint (shown where the default would be) of options whose default says nothing."""
+
+
+@dataclasses.dataclass(frozen=True)
+class _HighLevel(LearnerConfig):
+    """The high level's learner settings, told apart from the low level's for their help."""
+
+
+def settings_registry(omit: frozenset[str] = frozenset(), hints: Hints = REQUIRED_ENV) -> ConstructorRegistry:
+    """How tyro builds the settings' options for one command: each with its help text, the
+    metavar and hint ``hints`` give, and none for the settings in ``omit`` (they keep their
+    default)."""
+    registry = ConstructorRegistry()
+
+    @registry.struct_rule
+    def settings(info: StructTypeInfo) -> StructConstructorSpec | None:
+        if info.type not in (TrainConfig, DotToDotConfig, LearnerConfig, _HighLevel):
+            return None
+        high = info.type is _HighLevel
+        cls = LearnerConfig if high else info.type
+        docs = {**field_help(cls), **(HIGH_LEVEL_HELP if high else {})}
+        shown = (HIGH_LEVEL_HINTS if high else LEARNER_HINTS) if cls is LearnerConfig else hints
+        annotations = typing.get_type_hints(cls, include_extras=True)
+        fields = []
+        for field in dataclasses.fields(cls):
+            if field.name in omit:
+                continue
+            kind, default = annotations[field.name], getattr(info.default, field.name)
+            if field.name == "high":
+                kind, default = _HighLevel, _HighLevel(**dataclasses.asdict(default))
+            elif field.name in shown:
+                metavar, hint = shown[field.name]
+                kind = Annotated[kind, tyro.conf.arg(metavar=metavar, help_behavior_hint=hint)]
+            fields.append(StructFieldSpec(field.name, kind, default, docs[field.name]))
+        instantiate = LearnerConfig if high else cls
+        return StructConstructorSpec(functools.partial(_made, instantiate, info.default), tuple(fields))
+
+    return registry
+
+
+def _made(cls: type, defaults: Any, **given: Any) -> Any:
+    """An instance of ``cls``: ``defaults`` with what was given (the options a command omits
+    keep their default)."""
+    return cls(
+        **{**{field.name: getattr(defaults, field.name) for field in dataclasses.fields(cls)}, **given}
+    )
 
 
 @functools.cache
 def field_help(cls: type) -> dict[str, str]:
-    """The docstring below each field of dataclass ``cls``, as one paragraph per blank line."""
-    tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
-    body = tree.body[0].body  # type: ignore[attr-defined]
-    docs = {}
-    for field, after in itertools.pairwise(body):
-        if (
-            isinstance(field, ast.AnnAssign)
-            and isinstance(field.target, ast.Name)
-            and isinstance(after, ast.Expr)
-            and isinstance(after.value, ast.Constant)
-            and isinstance(after.value.value, str)
-        ):
-            docs[field.target.id] = as_sentences(after.value.value)
-    return docs
+    """The docstring below each field of dataclass ``cls``, as tyro reads it, in whole
+    sentences: single line breaks joined, reST literals plain (``x`` becomes x)."""
+    return {
+        param.arg_name: as_sentences(param.description)
+        for param in docstring_parser.parse_from_object(cls).params
+        if param.description
+    }
 
 
 def as_sentences(text: str) -> str:
@@ -120,79 +155,11 @@ def _joined_arguments(lines: list[str]) -> list[str]:
     return joined
 
 
-def options_class(
-    defaults: TrainConfig,
-    omit: frozenset[str] = frozenset(),
-    hints: dict[str, tuple[str, str]] = REQUIRED_ENV,
-) -> type:
-    """A frozen dataclass of :class:`TrainConfig`'s fields but ``omit``, defaults from
-    ``defaults``, each with its help text (and the metavar and hint ``hints`` give);
-    :func:`to_config` turns an instance back."""
-    return _options(TrainConfig, defaults, omit, hints, "TrainOptions")
-
-
-def _options(
-    cls: type, defaults: Any, omit: frozenset[str], hints: dict[str, tuple[str, str]], name: str
-) -> type:
-    types = typing.get_type_hints(cls)
-    docs = field_help(cls)
-    fields: list[tuple[str, Any, Any]] = []
-    for field in dataclasses.fields(cls):
-        if field.name in omit:
-            continue
-        value = getattr(defaults, field.name)
-        if isinstance(value, LearnerConfig):
-            level = _learner_options(value, high=field.name == "high")
-            annotation: Any = Annotated[level, tyro.conf.arg(help=docs[field.name])]
-            if field.name == "learner":
-                annotation = tyro.conf.OmitArgPrefixes[annotation]
-            value = level()
-        elif isinstance(value, DotToDotConfig):
-            # Its options keep their names (--segments, --high.batch-size): no prefix.
-            group = _options(DotToDotConfig, value, omit, hints, "DotToDotOptions")
-            annotation = Annotated[group, tyro.conf.arg(name="")]
-            value = group()
-        else:
-            metavar, hint = hints.get(field.name, (None, None))
-            arg = tyro.conf.arg(help=docs[field.name], metavar=metavar, help_behavior_hint=hint)
-            annotation = Annotated[types[field.name], arg]
-        fields.append((field.name, annotation, dataclasses.field(default=value)))
-    return dataclasses.make_dataclass(name, fields, frozen=True)
-
-
-def _learner_options(defaults: LearnerConfig, high: bool) -> type:
-    hints = typing.get_type_hints(LearnerConfig)
-    docs = {**field_help(LearnerConfig), **(HIGH_LEVEL_HELP if high else {})}
-    metavars = HIGH_LEVEL_HINTS if high else LEARNER_HINTS
-    fields = []
-    for field in dataclasses.fields(LearnerConfig):
-        metavar, hint = metavars.get(field.name, (None, None))
-        arg = tyro.conf.arg(help=docs[field.name], metavar=metavar, help_behavior_hint=hint)
-        default = dataclasses.field(default=getattr(defaults, field.name))
-        fields.append((field.name, Annotated[hints[field.name], arg], default))
-    return dataclasses.make_dataclass("HighLevelOptions" if high else "LearnerOptions", fields, frozen=True)
-
-
-def to_config(options: Any) -> TrainConfig:
-    """The :class:`TrainConfig` an instance of an :func:`options_class` stands for."""
-    return TrainConfig(**_values(options))
-
-
-def _values(options: Any) -> dict[str, Any]:
-    values = {field.name: getattr(options, field.name) for field in dataclasses.fields(options)}
-    for name in ("learner", "high"):
-        if name in values:
-            values[name] = LearnerConfig(**dataclasses.asdict(values[name]))
-    if "dtd" in values:
-        values["dtd"] = DotToDotConfig(**_values(values["dtd"]))
-    return values
-
-
 def deferred(
-    function: Callable[..., None], options: type | None = None, bound: Mapping[str, Any] | None = None
+    function: Callable[..., None], defaults: TrainConfig | None = None, bound: Mapping[str, Any] | None = None
 ) -> Callable[..., Command]:
     """A stand-in for command ``function`` that tyro parses into: the same options (its
-    ``config`` parameter as the view ``options``) and help, returning the call to make
+    ``config`` parameter's defaults ``defaults``) and help, returning the call to make
     instead of making it; the parameters named in ``bound`` are no options, but given these
     values."""
     bound = dict(bound or {})
@@ -203,15 +170,12 @@ def deferred(
         if parameter.name in bound:
             continue
         annotation = as_declared(hints.get(parameter.name, parameter.annotation), parameter.default)
-        if parameter.name == "config" and options is not None:
-            annotation = Annotated[options, tyro.conf.arg(name="")]
-            parameter = parameter.replace(default=options())
+        if parameter.name == "config" and defaults is not None:
+            parameter = parameter.replace(default=defaults)
         # Keyword-only: a default given to config may precede options without one.
         parameters.append(parameter.replace(annotation=annotation, kind=inspect.Parameter.KEYWORD_ONLY))
 
     def parse(**given: Any) -> Command:
-        if "config" in given:
-            given["config"] = to_config(given["config"])
         return functools.partial(function, **given, **bound)
 
     parse.__signature__ = signature.replace(parameters=parameters)  # type: ignore[attr-defined]
@@ -232,16 +196,23 @@ def as_declared(hint: Any, default: Any) -> Any:
     return annotated[0] if len(members) == 2 and len(annotated) == 1 and type(None) in members else hint
 
 
-def parse_command(commands: dict[str, Callable[..., Command]], description: str, args: list[str]) -> Command:
-    """The command ``args`` name, parsed; ``--help`` prints and exits 0, a parse error is a
+def parse_command(
+    commands: dict[str, Callable[..., Command]],
+    description: str,
+    args: list[str],
+    registries: Mapping[str, ConstructorRegistry],
+) -> Command:
+    """The command ``args`` name, parsed (its settings' options as ``registries`` says, for a
+    command that takes them); ``--help`` prints and exits 0, a parse error is a
     :class:`DtdError` of one line."""
     if args and not args[0].startswith("-") and args[0] not in commands:
         raise DtdError(f"unknown command {args[0]!r}; the commands are {', '.join(commands)}")
+    registry = registries.get(args[0]) if args else None
     errors = io.StringIO()
     try:
         with contextlib.redirect_stderr(errors):
             return tyro.extras.subcommand_cli_from_dict(
-                commands, prog="dtd", description=description, args=args
+                commands, prog="dtd", description=description, args=args, registry=registry
             )
     except SystemExit as exc:
         if exc.code in (0, None):
