@@ -1,6 +1,8 @@
 """The run directory: a contract between training and every tool that reads its results.
 
-config.json            resolved configuration and package versions
+config.json            the settings as given (Dot-to-Dot's under "dtd"), what follows from them
+                       and the task ("derived": the task's spec, the batch and n-step the
+                       algorithm chose), package versions
 metrics.csv            one row per finished epoch
 eval-latest.json       the latest checkpoint's evaluation over many episodes, once saved
                        (dtd eval --save, dtd sweep --final-episodes): the run's final of record
@@ -148,7 +150,7 @@ def package_versions() -> dict[str, str]:
 
 
 def write_config(run: RunDir, config: TrainConfig, derived: dict[str, Any]) -> None:
-    """Write config.json atomically: the configuration, facts derived from the env, versions."""
+    """Write config.json atomically: the settings, facts derived from them and the task, versions."""
     payload = {"config": config.to_dict(), "derived": derived, "versions": package_versions()}
     write_text_atomic(run.config, json.dumps(payload, indent=2) + "\n")
 
