@@ -82,37 +82,33 @@ def test_one_worker_is_a_run_of_its_own(tmp_path, algo):
     assert_same_figures(read_metrics(run_dir), read_metrics(DATA / algo))
 
 
-def test_a_killed_worker_stops_the_job_in_one_line_and_resume_finishes(tmp_path):
-    run_dir = tmp_path / "run"
-    args = [
-        "--env",
-        "FetchReach-v4",
-        "--algo",
-        "her",
-        "--seed",
-        "4",
-        "--epochs",
-        "4",
-        *TINY,
-        "--workers",
-        "2",
-    ]
+def job_after_its_first_epoch(run_dir: Path, epochs: int) -> subprocess.Popen[str]:
+    """``dtd train --workers 2`` of a tiny FetchReach her run, in a session of its own (a
+    terminal's Ctrl-C reaches its whole process group), once its first epoch has finished."""
+    args = ["--env", "FetchReach-v4", "--algo", "her", "--seed", "4", "--epochs", str(epochs), *TINY]
     launcher = subprocess.Popen(
-        [sys.executable, "-m", "dtd", "train", *args, "--run-dir", str(run_dir)],
+        [sys.executable, "-m", "dtd", "train", *args, "--workers", "2", "--run-dir", str(run_dir)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        start_new_session=True,
+        # A test runner in the background may have left SIGINT ignored for its children.
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     deadline = time.monotonic() + 240
-    while not (run_dir / "metrics.csv").exists():  # an epoch finished: kill within the next
+    while not (run_dir / "metrics.csv").exists():
         assert launcher.poll() is None, launcher.communicate()
         assert time.monotonic() < deadline
         time.sleep(0.05)
-    workers = subprocess.run(
-        ["pgrep", "-P", str(launcher.pid)], capture_output=True, text=True
-    ).stdout.split()
+    return launcher
+
+
+def test_a_killed_worker_stops_the_job_in_one_line_and_resume_finishes(tmp_path):
+    run_dir = tmp_path / "run"
+    launcher = job_after_its_first_epoch(run_dir, epochs=4)  # kill within the next epoch
+    workers = children(launcher.pid)
     assert len(workers) == 2
-    killed = int(workers[1])
+    killed = workers[1]
     os.kill(killed, signal.SIGKILL)
     started = time.monotonic()
     _, stderr = launcher.communicate(timeout=60)
@@ -133,33 +129,7 @@ def test_a_killed_worker_stops_the_job_in_one_line_and_resume_finishes(tmp_path)
 @pytest.mark.parametrize("stop", ["ctrl-c", "sigterm"])
 def test_an_interrupted_job_stops_every_worker_in_one_line_and_resumes(tmp_path, stop):
     run_dir = tmp_path / "run"
-    args = [
-        "--env",
-        "FetchReach-v4",
-        "--algo",
-        "her",
-        "--seed",
-        "4",
-        "--epochs",
-        "3",
-        *TINY,
-        "--workers",
-        "2",
-    ]
-    launcher = subprocess.Popen(
-        [sys.executable, "-m", "dtd", "train", *args, "--run-dir", str(run_dir)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,  # a terminal's Ctrl-C reaches its whole process group
-        # A test runner in the background may have left SIGINT ignored for its children.
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
-    )
-    deadline = time.monotonic() + 240
-    while not (run_dir / "metrics.csv").exists():  # an epoch finished
-        assert launcher.poll() is None, launcher.communicate()
-        assert time.monotonic() < deadline
-        time.sleep(0.05)
+    launcher = job_after_its_first_epoch(run_dir, epochs=3)
     workers = children(launcher.pid)
     assert len(workers) == 2
     if stop == "ctrl-c":
