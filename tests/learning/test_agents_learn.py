@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dtd.agents.segments import subgoal_placement
-from dtd.config import Algo, Collection, LearnerConfig, TrainConfig
+from dtd.config import Algo, Collection, DotToDotConfig, LearnerConfig, TrainConfig
 from dtd.training.lifecycle import train
 from dtd.training.trained_run import evaluate_run, load_agent
 from tests.helpers import dtd
@@ -56,10 +56,12 @@ def test_dtd_high_level_leads_toward_a_goal_beyond_one_segments_reach(tmp_path):
         test_episodes=20,
         threads=1,
         collector=Collection.inline,
-        subgoal_max_distance=0.5,
-        subgoal_eps_decay_epochs=8,
         learner=learner,
-        high=dataclasses.replace(learner, batch_size=64),
+        dtd=DotToDotConfig(
+            subgoal_max_distance=0.5,
+            subgoal_eps_decay_epochs=8,
+            high=dataclasses.replace(learner, batch_size=64),
+        ),
     )
     train(config, run_dir=tmp_path / "run", show_progress=False)
     figures = evaluate_run(tmp_path / "run", episodes=100, checkpoint="latest", seed=123)
@@ -131,10 +133,12 @@ def test_agents_learn_a_task_that_ends_on_reaching_the_goal(tmp_path, algo):
         test_episodes=20,
         threads=1,
         collector=Collection.inline,
-        subgoal_max_distance=0.5,
-        subgoal_eps_decay_epochs=4,
         learner=learner,
-        high=dataclasses.replace(learner, batch_size=64),
+        dtd=DotToDotConfig(
+            subgoal_max_distance=0.5,
+            subgoal_eps_decay_epochs=4,
+            high=dataclasses.replace(learner, batch_size=64),
+        ),
     )
     state = train(config, run_dir=tmp_path / "run", show_progress=False)
     # Episodes end on success, so the run took fewer steps than 8 x 10 x 4 x 20.
