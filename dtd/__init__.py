@@ -29,6 +29,7 @@ if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.env
 
 _PUBLIC = {
     "Algo": "dtd.config",
+    "DotToDotConfig": "dtd.config",
     "LearnerConfig": "dtd.config",
     "Preset": "dtd.config",
     "TrainConfig": "dtd.config",
@@ -46,6 +47,7 @@ _PUBLIC = {
 
 __all__ = [
     "Algo",
+    "DotToDotConfig",
     "DtdError",
     "LearnerConfig",
     "LoadedRun",
@@ -62,7 +64,15 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
-    from dtd.config import Algo, LearnerConfig, Preset, TrainConfig, preset_config, with_settings
+    from dtd.config import (
+        Algo,
+        DotToDotConfig,
+        LearnerConfig,
+        Preset,
+        TrainConfig,
+        preset_config,
+        with_settings,
+    )
     from dtd.errors import DtdError
     from dtd.training.checkpoint import TrainState
     from dtd.training.lifecycle import train, train_for_steps
