@@ -26,7 +26,7 @@ import torch
 
 from dtd.config import Algo, Collection, TrainConfig
 from dtd.envs.make import make_env
-from dtd.training.components import build, close_all
+from dtd.training.components import build
 
 
 class TimedPhysics:
@@ -73,7 +73,7 @@ def measure(config: TrainConfig, episodes: int) -> tuple[float, float, int, int]
         physics_rate = physics_steps / sum(timer.seconds for timer in timers)
         return steps / elapsed, physics_rate, steps, components.spec.horizon
     finally:
-        close_all(components)
+        components.close()
 
 
 def environment_alone(env_id: str, steps: int, horizon: int) -> tuple[float, float]:

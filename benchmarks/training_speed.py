@@ -18,7 +18,7 @@ import time
 import torch
 
 from dtd.config import Algo, Collection, TrainConfig, with_settings
-from dtd.training.components import build, close_all
+from dtd.training.components import build
 
 
 def seconds_per_kilostep(
@@ -43,7 +43,7 @@ def seconds_per_kilostep(
         collector.result()
         return 1000.0 * (time.perf_counter() - start) / steps, threads
     finally:
-        close_all(components)
+        components.close()
 
 
 def main() -> None:

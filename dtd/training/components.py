@@ -34,19 +34,6 @@ from dtd.errors import ConfigError
 from dtd.training.collector import Collector, InlineCollector, ProcessCollector
 
 
-@dataclasses.dataclass
-class Components:
-    """Everything a run is made of, built from its configuration."""
-
-    spec: EnvSpec
-    agent: Agent
-    collector: Collector
-    """Exploring episodes of the training environments."""
-    eval_envs: list[gym.Env]
-    rng: np.random.Generator
-    """Replay sampling (and anything else the learner draws)."""
-
-
 def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Collective = ALONE) -> Agent:
     """The agent ``config.algo`` names, with fresh networks and an empty replay; its learners
     combine their updates with fellow workers through ``collective``."""
@@ -140,6 +127,20 @@ class Acting:
         close_envs(self.envs)
 
 
+@dataclasses.dataclass
+class Components(Acting):
+    """Everything a run is made of, built from its configuration: the agent on its evaluation
+    environments, and the collector of its exploring episodes."""
+
+    collector: Collector
+    """Exploring episodes of the training environments."""
+
+    def close(self) -> None:
+        """Close every environment (and the collecting process)."""
+        self.collector.close()
+        super().close()
+
+
 def build_acting(
     config: TrainConfig,
     eval_seed: int | None = None,
@@ -200,7 +201,7 @@ def build(
     except BaseException:
         acting.close()
         raise
-    return Components(acting.spec, acting.agent, collector, acting.envs, acting.rng)
+    return Components(acting.spec, acting.agent, acting.envs, acting.rng, collector)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -292,12 +293,6 @@ def make_task_envs(config: TrainConfig, count: int) -> tuple[list[gym.Env], EnvS
     """``count`` environments of ``config.env`` made with ``config.env_kwargs``, and the spec."""
     assert config.env is not None
     return make_envs(config.env, count, env_kwargs(config.env_kwargs), config.time_feature)
-
-
-def close_all(components: Components) -> None:
-    """Close every environment (and the collecting process) of ``components``."""
-    components.collector.close()
-    close_envs(components.eval_envs)
 
 
 def close_envs(envs: list[gym.Env]) -> None:

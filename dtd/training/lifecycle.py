@@ -14,7 +14,7 @@ from dtd.envs.spec import EnvSpec
 from dtd.errors import CheckpointError, ConfigError, RunDirError, WorkerLost
 from dtd.training.atomic import remove_stale_temporaries
 from dtd.training.checkpoint import Checkpoint, TrainState, restoring
-from dtd.training.components import Components, build, close_all, make_task_envs, resolved_threads
+from dtd.training.components import Components, build, make_task_envs, resolved_threads
 from dtd.training.launch import ALONE_HERE, JobPlace
 from dtd.training.progress import TrainingProgress
 from dtd.training.recorder import MetricsRecorder
@@ -205,10 +205,10 @@ def _started(
         checkpoint = latest if group.writes else Checkpoint.read(path)
         checkpoint.check_fits(settings, components.spec, path)
         state = restore(
-            checkpoint, components.agent, components.rng, components.collector, components.eval_envs, path
+            checkpoint, components.agent, components.rng, components.collector, components.envs, path
         )
     except CheckpointError:
-        close_all(components)
+        components.close()
         raise
     return components, state
 
@@ -238,7 +238,7 @@ def _train_started(
                 components.spec,
                 components.agent,
                 components.collector,
-                components.eval_envs,
+                components.envs,
                 components.rng,
                 run,
                 recorder,
@@ -253,7 +253,7 @@ def _train_started(
     finally:
         if recorder is not None:
             recorder.close()
-        close_all(components)
+        components.close()
 
 
 def train_to_end(config: TrainConfig, run_dir: Path | str) -> TrainState:

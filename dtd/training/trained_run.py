@@ -9,11 +9,9 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 
 from dtd.agents.interface import Agent
 from dtd.config import EVAL_SEED, Device, TrainConfig
-from dtd.envs.spec import EnvSpec
 from dtd.errors import ConfigError
 from dtd.training.atomic import write_text_atomic
 from dtd.training.checkpoint import Checkpoint
@@ -23,35 +21,16 @@ from dtd.training.run_dir import CHECKPOINT_NAMES, RunDir, read_config
 
 
 @dataclasses.dataclass
-class LoadedRun:
-    """A trained run brought back: its settings, one checkpoint, and its agent acting on
-    seeded evaluation environments (close them with :meth:`close`, or use it in ``with``)."""
+class LoadedRun(Acting):
+    """A trained run brought back: its agent, restored from one checkpoint, acting on seeded
+    evaluation environments (close them with :meth:`close`, or use it in ``with``), and its
+    settings and checkpoint."""
 
     run: RunDir
     config: TrainConfig
     path: Path
     """The checkpoint file it was loaded from."""
     checkpoint: Checkpoint
-    acting: Acting
-
-    @property
-    def agent(self) -> Agent:
-        return self.acting.agent
-
-    @property
-    def spec(self) -> EnvSpec:
-        return self.acting.spec
-
-    @property
-    def envs(self) -> list[gym.Env]:
-        return self.acting.envs
-
-    @property
-    def rng(self) -> np.random.Generator:
-        return self.acting.rng
-
-    def close(self) -> None:
-        self.acting.close()
 
     def __enter__(self) -> LoadedRun:
         return self
@@ -83,7 +62,7 @@ def load_run(
     except BaseException:
         acting.close()
         raise
-    return LoadedRun(run, config, path, stored, acting)
+    return LoadedRun(acting.spec, acting.agent, acting.envs, acting.rng, run, config, path, stored)
 
 
 def load_agent(run_dir: Path | str, checkpoint: str = "latest") -> tuple[Agent, gym.Env]:

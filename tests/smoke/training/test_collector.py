@@ -5,7 +5,7 @@ import pytest
 
 from dtd.config import Algo, Collection, TrainConfig
 from dtd.training.collector import CollectorProcessError, InlineCollector, ProcessCollector
-from dtd.training.components import build, close_all
+from dtd.training.components import build
 
 pytestmark = pytest.mark.smoke
 
@@ -36,7 +36,7 @@ def test_process_and_inline_collection_give_the_same_episodes(algo):
                 batches.append(episodes)
             state = components.collector.state_dict()
         finally:
-            close_all(components)
+            components.close()
         runs.append((batches, state))
     (inline, inline_state), (process, process_state) = runs
     for a, b in zip(inline, process, strict=True):
