@@ -197,3 +197,20 @@ def read_only(folder: Path) -> Iterator[None]:
         yield
     finally:
         subprocess.run(["umount", str(folder)], check=True)
+
+
+@contextlib.contextmanager
+def small_disk(folder: Path, size_bytes: int) -> Iterator[Path]:
+    """``folder`` as a filesystem of its own of ``size_bytes`` (a tmpfs), which a writer fills
+    with a real "no space left on device"; skipped where this process cannot mount one."""
+    folder.mkdir(parents=True, exist_ok=True)
+    size = f"size={max(4096, size_bytes // 4096 * 4096)}"
+    mounted = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", size, "tmpfs", str(folder)], capture_output=True, text=True
+    )
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a small filesystem at {folder} here: {mounted.stderr.strip()}")
+    try:
+        yield folder
+    finally:
+        subprocess.run(["umount", "--lazy", str(folder)], check=True)

@@ -18,17 +18,40 @@ import io
 import re
 import sys
 import typing
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Annotated, Any
 
 import docstring_parser
 import tyro
 from tyro.constructors import ConstructorRegistry, StructConstructorSpec, StructFieldSpec, StructTypeInfo
 
-from dtd.config import DotToDotConfig, LearnerConfig, TrainConfig
+from dtd.config import DotToDotConfig, LearnerConfig, TrainConfig, flat_items
 from dtd.errors import DtdError
 
 Command = Callable[[], None]
+
+
+def settings_given(args: Sequence[str]) -> frozenset[str]:
+    """The settings a command line gives, by their names in :func:`dtd.config.flat_items`
+    (``n_cycles``, ``learner``, ``high.batch_size``, ``preset``), read from its options as typed
+    (``--n-cycles 50``, ``--n-cycles=50``, ``--no-time-feature``), whatever their values: a
+    setting given at its default is given all the same. Options that are no settings
+    (``--resume``, ``--force``) are left out."""
+    names = set(flat_items(TrainConfig()))
+    flags = {name for name, value in flat_items(TrainConfig()).items() if isinstance(value, bool)}
+    given = set()
+    for arg in args:
+        if arg == "--":
+            break  # what follows is positional
+        if not arg.startswith("--"):
+            continue
+        group, dot, name = arg[2:].partition("=")[0].replace("-", "_").rpartition(".")
+        if name.startswith("no_") and group + dot + name[3:] in flags:
+            name = name[3:]  # --no-time-feature, --high.no-layer-norm
+        name = group + dot + name
+        if name in names:
+            given.add(name)
+    return frozenset(given)
 
 
 def optional(metavar: str, default: str) -> Any:

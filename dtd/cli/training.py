@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import contextlib
 import json
 import signal
 import sys
 import warnings
-from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -54,9 +52,10 @@ def train(
         place: This process's place in a job of workers (the command line reads it).
         invocation: The command's arguments, which the workers started here are given.
     """
+    from dtd.cli.options import settings_given
     from dtd.training.lifecycle import epochs_recorded, plan_start, train_planned
 
-    plan = plan_start(config, run_dir, resume, force, place)
+    plan = plan_start(config, run_dir, resume, force, place, given=settings_given(invocation[1:]))
     if not place.in_job and plan.workers > 1:
         _launch_workers(plan, oversubscribe, invocation)
         return
@@ -177,8 +176,7 @@ def sweep(
     trials = sweep_trials(config, chosen, seeds, out, final_episodes, grid)
     trials_at_once(trials, parallel)  # refused before anything is written
     ensure_writable(out, "the sweep's runs")
-    with _terminated_as_interrupted():
-        outcomes = run_sweep(trials, parallel=parallel, ray_address=ray, show_progress=progress)
+    outcomes = run_sweep(trials, parallel=parallel, ray_address=ray, show_progress=progress)
     failed = [outcome for outcome in outcomes if not outcome.ok]
     for outcome in failed:
         print(f"{outcome.trial.name} failed:\n{outcome.error}", file=sys.stderr)
@@ -188,20 +186,6 @@ def sweep(
     print(f"{len(outcomes) - len(failed)} of {len(outcomes)} trials finished in {out}")
     if failed:
         sys.exit(1)
-
-
-@contextlib.contextmanager
-def _terminated_as_interrupted() -> Iterator[None]:
-    """SIGTERM (a scheduler's stop) handled as Ctrl-C while the block runs."""
-
-    def interrupt(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 def plot(

@@ -128,4 +128,4 @@ def with_settings(config: TrainConfig, settings: Sequence[str]) -> TrainConfig:
             target[leaf] = json.loads(value)
         except json.JSONDecodeError:
             target[leaf] = value
-    return TrainConfig.from_dict(data)
+    return TrainConfig.from_dict(data, written_before=False)  # a 0 given is a 0, refused by validate

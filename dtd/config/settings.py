@@ -321,7 +321,8 @@ class TrainConfig:
     """Settings of the learner (of the low level, for dtd)."""
     dtd: Annotated[DotToDotConfig, tyro.conf.arg(name="")] = DotToDotConfig()
     """Dot-to-Dot's segments, sub-goal exploration, high-level relabelling and high level's
-    learner (options without a prefix, but ``--high.<name>``); other algorithms ignore them."""
+    learner (options without a prefix, but ``--high.<name>``); given to another algorithm,
+    they are refused."""
 
     def validate(self) -> None:
         """Raise :class:`ConfigError` naming the first setting that cannot work."""
@@ -332,11 +333,14 @@ class TrainConfig:
         return _plain(dataclasses.asdict(self))
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
+    def from_dict(cls, data: dict[str, Any], written_before: bool = True) -> TrainConfig:
         """Inverse of :meth:`to_dict`; unknown keys and values of the wrong type are a
-        :class:`ConfigError` naming the setting, missing keys take defaults (those of
-        :data:`SETTINGS_BEFORE_THEIR_KEY` their value from before the key existed)."""
-        if isinstance(data, dict):
+        :class:`ConfigError` naming the setting. With ``written_before`` (data an earlier dtd may
+        have written: a config.json, a checkpoint), missing keys take defaults (those of
+        :data:`SETTINGS_BEFORE_THEIR_KEY` their value from before the key existed), a 0 batch or
+        n-step reads as unset, and flat Dot-to-Dot settings as grouped; without it (settings
+        given now, :func:`with_settings`) every value is taken as it is."""
+        if isinstance(data, dict) and written_before:
             data = _grouped(_unset_zeros({**SETTINGS_BEFORE_THEIR_KEY, **data}))
         return cls(**_typed_fields(cls, data, ""))
 

@@ -45,9 +45,16 @@ def env_kwargs(items: Sequence[str]) -> dict[str, Any]:
     for item in items:
         key, equals, text = item.partition("=")
         if not equals or not key.strip().isidentifier():
-            raise EnvError(f"--env-kwargs takes KEY=VALUE items, got {item!r}")
+            raise EnvError(f"--env-kwargs takes KEY=VALUE items, got {_cut(repr(item))}")
+        if key.strip() in kwargs:
+            raise EnvError(f"--env-kwargs gives {key.strip()} twice; give each argument once")
         kwargs[key.strip()] = _literal(text.strip())
     return kwargs
+
+
+def _cut(text: str, limit: int = 80) -> str:
+    """``text`` as an error line shows it: at most ``limit`` characters, and how many it had."""
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text):,} characters)"
 
 
 def _literal(text: str) -> Any:
@@ -70,7 +77,9 @@ def make_env(env_id: str, kwargs: Mapping[str, Any] | None = None) -> gym.Env:
     except TypeError as exc:
         if not kwargs:
             raise
-        raise EnvError(f"environment {env_id!r} refused --env-kwargs {_shown(kwargs)}: {exc}") from exc
+        raise EnvError(
+            f"environment {env_id!r} refused --env-kwargs {_shown(kwargs)}: {_cut(str(exc), 300)}"
+        ) from exc
     except ModuleNotFoundError as exc:
         module = env_id.split(":")[0]
         raise EnvError(f"cannot import module {module!r} named in environment id {env_id!r}") from exc
@@ -89,7 +98,7 @@ def _unknown_env_message(env_id: str) -> str:
 
 
 def _shown(kwargs: Mapping[str, Any]) -> str:
-    return " ".join(f"{key}={value!r}" for key, value in kwargs.items())
+    return " ".join(f"{key}={_cut(repr(value))}" for key, value in kwargs.items())
 
 
 def make_envs(

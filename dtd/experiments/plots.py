@@ -11,6 +11,7 @@ final success and of the env steps and wall time to reach each success level.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,7 @@ import numpy as np
 
 from dtd.errors import RunDirError
 from dtd.experiments.curves import Curve, band
-from dtd.experiments.run_curves import cut_at, env_order, find_runs, grouped, label_colours
+from dtd.experiments.run_curves import UnreadableRun, cut_at, env_order, find_runs, grouped, label_colours
 from dtd.experiments.statistics import (
     check_intervals_possible,
     draw_statistics,
@@ -30,7 +31,7 @@ from dtd.experiments.statistics import (
 )
 from dtd.experiments.summary import summaries, summary_csv, summary_table
 from dtd.figures import pyplot, save_figure
-from dtd.training.atomic import ensure_writable, write_text_atomic
+from dtd.training.atomic import staged
 
 TASKS_FIGURE = "tasks"
 """The stem of the figure of every environment side by side (written for runs of two or more)."""
@@ -130,35 +131,44 @@ def plot(
     compared at one. With ``stats``, also the aggregate statistics of final success
     (:mod:`dtd.experiments.statistics`): a figure per environment (ENV-stats), columns of
     summary.csv and a table."""
-    runs = find_runs(directories)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        runs = find_runs(directories)
+    unreadable = [str(warning.message) for warning in caught if issubclass(warning.category, UnreadableRun)]
     if max_env_steps is not None:
         runs = cut_at(runs, max_env_steps)
     if not runs:
         budget = f" within {max_env_steps:,.0f} env steps" if max_env_steps is not None else ""
+        reasons = f" ({'; '.join(unreadable)})" if unreadable else ""
         raise RunDirError(
             f"no run with a finished epoch{budget} under "
             + ", ".join(str(directory) for directory in directories)
+            + reasons
         )
+    for warning in caught:  # passed on, now that the runs left out are not the whole answer
+        warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
     if stats:
         require_rliable()
         check_intervals_possible(runs)
-    ensure_writable(Path(out), "the figures")
-    figures = []
     groups = grouped(runs)
-    for env, labels in groups.items():
-        figures += draw(env, labels, Path(out) / env.split(":")[-1])
-    if len(groups) > 1:
-        figures += draw_tasks(groups, Path(out) / TASKS_FIGURE)
     rows = summaries(runs)
-    extra = None
     statistics = group_statistics(runs) if stats else []
-    if statistics:
-        extra = statistics_columns(statistics)
-        for env in sorted({group.env for group in statistics}, key=env_order):
-            in_env = [group for group in statistics if group.env == env]
-            figures += draw_statistics(env, in_env, Path(out) / f"{env.split(':')[-1]}-stats")
+    drawn: list[Path] = []
+    # Every figure and summary.csv at once: a full disk or an interrupt leaves --out as it was.
+    with staged(Path(out), "the figures") as folder:
+        for env, labels in groups.items():
+            drawn += draw(env, labels, folder / env.split(":")[-1])
+        if len(groups) > 1:
+            drawn += draw_tasks(groups, folder / TASKS_FIGURE)
+        extra = None
+        if statistics:
+            extra = statistics_columns(statistics)
+            for env in sorted({group.env for group in statistics}, key=env_order):
+                in_env = [group for group in statistics if group.env == env]
+                drawn += draw_statistics(env, in_env, folder / f"{env.split(':')[-1]}-stats")
+        (folder / "summary.csv").write_text(summary_csv(rows, extra))
+    figures = [Path(out) / path.relative_to(folder) for path in drawn]
     csv_path = Path(out) / "summary.csv"
-    write_text_atomic(csv_path, summary_csv(rows, extra))
     table = summary_table(rows)
     if statistics:
         table += "\n\n" + statistics_table(statistics)

@@ -4,6 +4,7 @@ algorithm, and cut at an env-step budget to compare runs of different lengths.""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import warnings
 from collections.abc import Sequence
@@ -54,16 +55,25 @@ def final_success(run: RunCurve) -> FinalSuccess:
     --final-episodes``), else the last epoch's eval success (over ``test_episodes``, noisier)."""
     last_epoch, env_steps = int(run.curve.epoch[-1]), float(run.curve.env_steps[-1])
     saved = RunDir(run.run_dir).final_evaluation
-    if saved.is_file():
-        try:
-            evaluation = json.loads(saved.read_text())
-            if int(evaluation["epoch"]) == last_epoch:
-                return FinalSuccess(
-                    float(evaluation["success_rate"]), int(evaluation["episodes"]), env_steps, True
-                )
-        except (ValueError, KeyError, TypeError):
-            pass
+    evaluation = _saved_evaluation(saved, saved.stat().st_mtime_ns) if saved.is_file() else None
+    if evaluation is not None and evaluation[0] == last_epoch:
+        return FinalSuccess(evaluation[1], evaluation[2], env_steps, True)
     return FinalSuccess(run.curve.final_success, run.test_episodes, env_steps, False)
+
+
+@functools.cache
+def _saved_evaluation(path: Path, modified_ns: int) -> tuple[int, float, int] | None:
+    """Epoch, success rate and episodes of a saved evaluation; None, with a warning (once per
+    version of the file), where it cannot be read."""
+    try:
+        evaluation = json.loads(path.read_text())
+        return int(evaluation["epoch"]), float(evaluation["success_rate"]), int(evaluation["episodes"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        reason = f"{type(exc).__name__}: {exc}"[:200]
+        warnings.warn(
+            f"{path} is unreadable ({reason}); the run's final is its last epoch's evaluation", stacklevel=3
+        )
+        return None
 
 
 def find_runs(directories: Sequence[Path]) -> list[RunCurve]:

@@ -106,8 +106,13 @@ def sweep_trials(
     for seed in range(base.seed, base.seed + seeds):
         for point in points:
             for algo in algos:
-                config = with_settings(dataclasses.replace(base, algo=algo, seed=seed), point)
-                config.validate()
+                try:  # every value as its option is checked, before any trial starts
+                    config = with_settings(dataclasses.replace(base, algo=algo, seed=seed), point)
+                    config.validate()
+                except ConfigError as exc:
+                    if not point:
+                        raise
+                    raise ConfigError(f"--grid {' '.join(point)}: {exc}") from exc
                 trials.append(Trial(config, root / trial_name(config, point), final_episodes))
     return trials
 

@@ -22,6 +22,7 @@ from dtd.agents.interface import Planner
 from dtd.envs.time_feature import as_observed
 from dtd.errors import ConfigError, EnvError
 from dtd.figures import pyplot
+from dtd.training.atomic import staged_file
 
 DEFAULT_START = (1.15, 0.55)
 """The block's default place: near one corner of the table, as in the paper's figure."""
@@ -83,6 +84,37 @@ def place_block_and_goal(
     check_on_table(table_of(env), start, goal)
     env.reset(seed=seed)
     return put_block_and_goal(env, start, goal)
+
+
+MAX_RESOLUTION = 200
+"""Most grid cells along a side of a heatmap (200 x 200 values), for the command and the page."""
+
+HIGHEST_ABOVE_TABLE = 0.5
+"""How far above the resting block (m) a slice or a goal may lie: the tasks' goals lie within it."""
+
+
+def check_resolution(resolution: int, name: str = "--resolution") -> None:
+    """A :class:`ConfigError` for a grid finer than :data:`MAX_RESOLUTION` or coarser than 2."""
+    if not 2 <= resolution <= MAX_RESOLUTION:
+        raise ConfigError(f"{name} must lie in 2..{MAX_RESOLUTION}, got {resolution}")
+
+
+def check_height(table: Table, z: float, name: str) -> None:
+    """A :class:`ConfigError` for a height ``z`` (m) below the resting block or more than
+    :data:`HIGHEST_ABOVE_TABLE` above it."""
+    lowest, highest = table.block_z, table.block_z + HIGHEST_ABOVE_TABLE
+    if not lowest <= z <= highest:
+        raise ConfigError(
+            f"{name} {z:.3f} lies outside {lowest:.3f}..{highest:.3f} m (the table to 0.5 m above it)"
+        )
+
+
+def check_placement(start: Sequence[float] | None, goal: Sequence[float] | None) -> None:
+    """A :class:`ConfigError` for a block not placed by x,y or a goal not by x,y or x,y,z."""
+    if start is not None and len(start) != 2:
+        raise ConfigError(f"--start takes the block's x,y (2 numbers), got {len(start)}")
+    if goal is not None and len(goal) not in (2, 3):
+        raise ConfigError(f"--goal takes x,y or x,y,z (2 or 3 numbers), got {len(goal)}")
 
 
 def check_on_table(
@@ -188,9 +220,11 @@ def draw_heatmaps(
         for row in range(len(slices), heights):
             (axes[0][row] if single else axes[row][column]).set_axis_off()
     figure.suptitle(title, fontsize=11)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    try:
+        with staged_file(path, "the heatmap") as staging:
+            figure.savefig(staging, dpi=110)
+    finally:
+        plt.close(figure)
     return path
 
 
@@ -220,6 +254,8 @@ def run_heatmaps(
         )
     if not checkpoints:
         raise ConfigError("--checkpoint names no checkpoint")
+    check_resolution(resolution)
+    check_placement(start, goal)
     ensure_writable(Path(out).parent, "the heatmap")
     rows: list[tuple[str, list[Heatmap]]] = []
     table = None
@@ -244,6 +280,10 @@ def run_heatmaps(
                 if levels is None:
                     in_air = bool(getattr(env.unwrapped, "target_in_the_air", False))
                     levels = [table.block_z + lift for lift in ((0.0, 0.1, 0.2, 0.3) if in_air else (0.0,))]
+                for z in levels:
+                    check_height(table, z, "--heights")
+                if goal is not None and len(goal) == 3:
+                    check_height(table, goal[2], "--goal's z")
                 placed = (start or DEFAULT_START, goal or DEFAULT_GOAL)
                 observation = place_block_and_goal(env, *placed)
                 slices = [value_slice(agent, observation, table, z, resolution) for z in levels]

@@ -9,7 +9,9 @@ geoms added to the scene, so :meth:`SceneRenderer.project` can say where they la
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import shutil
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -275,11 +277,28 @@ def is_planar(spec: EnvSpec) -> bool:
 
 
 def write_video(frames: Sequence[np.ndarray], path: Path, fps: int = 25) -> Path:
-    """Frames as an H.264 MP4 (yuv420p, which browsers play)."""
+    """Frames as an H.264 MP4 (yuv420p, which browsers play), read back once: ffmpeg's own
+    failures (a full disk) leave a file that cannot be read, and are a :class:`MachineError`."""
+    import errno
+
     import imageio.v2 as imageio
+    import imageio_ffmpeg
+
+    from dtd.errors import MachineError
+    from dtd.training.atomic import machine_failure
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    imageio.mimwrite(path, list(frames), fps=fps, codec="libx264", quality=7, macro_block_size=16)
+    imageio.mimwrite(
+        path, list(frames), fps=fps, codec="libx264", quality=7, macro_block_size=16, ffmpeg_log_level="quiet"
+    )
+    try:
+        imageio_ffmpeg.count_frames_and_secs(str(path))
+    except RuntimeError as exc:
+        full = shutil.disk_usage(path.parent).free < 1 << 20
+        reason = (
+            OSError(errno.ENOSPC, "No space left on device") if full else OSError(errno.EIO, "ffmpeg failed")
+        )
+        raise MachineError(machine_failure(reason, path)) from exc
     return path
 
 
@@ -323,22 +342,25 @@ def render_run(
     import json
 
     from dtd.errors import ConfigError
-    from dtd.training.atomic import ensure_writable, write_text_atomic
+    from dtd.training.atomic import staged
     from dtd.training.trained_run import load_run
 
     if episodes < 1:
         raise ConfigError(f"--episodes must be at least 1, got {episodes}")
     if width < 16 or height < 16:
         raise ConfigError(f"--width and --height must be at least 16, got {width}x{height}")
-    ensure_writable(Path(out), "rendered episodes")
     loaded = load_run(Path(run_dir), checkpoint, seed, envs=1)
     env, agent, spec = loaded.envs[0], loaded.agent, loaded.spec
     planner = agent.planner()
     bounds = planner.bounds if planner is not None else None
     plan_of = planner.plan if planner is not None else None
-    renderer = SceneRenderer(env, width, height, camera_for(spec.env_id))
     written = []
-    try:
+    # Every file written at once, when every episode is: an interrupt or a full disk leaves none.
+    with contextlib.ExitStack() as stack:
+        stack.callback(loaded.close)
+        folder = stack.enter_context(staged(Path(out), "rendered episodes"))
+        renderer = SceneRenderer(env, width, height, camera_for(spec.env_id))
+        stack.callback(renderer.close)
         for number in range(1, episodes + 1):
             rendered = render_episode(env, agent, spec, renderer, loaded.rng, bounds, plan_of)
             name = f"episode-{number}"
@@ -347,16 +369,12 @@ def render_run(
                 f"episode {number}: "
                 f"{marker_legend(spec.quaternion is not None, bounds is not None, is_planar(spec))}"
             )
+            write_video(rendered.frames, folder / f"{name}.mp4")
+            write_strip(rendered, folder / f"{name}-keyframes.png", title)
+            plan = plan_of(rendered.episode)[0] if plan_of else episode_plan(rendered.episode, 0, None)
             written.append(
-                RenderedFiles(
-                    write_video(rendered.frames, Path(out) / f"{name}.mp4"),
-                    write_strip(rendered, Path(out) / f"{name}-keyframes.png", title),
-                    plan_of(rendered.episode)[0] if plan_of else episode_plan(rendered.episode, 0, None),
-                )
+                RenderedFiles(Path(out) / f"{name}.mp4", Path(out) / f"{name}-keyframes.png", plan)
             )
-    finally:
-        renderer.close()
-        loaded.close()
-    plans = [{"episode": n, **files.plan} for n, files in enumerate(written, start=1)]
-    write_text_atomic(Path(out) / "plans.json", json.dumps(plans, indent=1) + "\n")
+        plans = [{"episode": n, **files.plan} for n, files in enumerate(written, start=1)]
+        (folder / "plans.json").write_text(json.dumps(plans, indent=1) + "\n")
     return written

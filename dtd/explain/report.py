@@ -16,7 +16,7 @@ from typing import Any
 from dtd.config import EVAL_SEED, flat_items
 from dtd.experiments.curves import Curve, read_curve
 from dtd.experiments.run_curves import RunCurve, final_success
-from dtd.training.atomic import ensure_writable, write_text_atomic
+from dtd.training.atomic import staged, write_text_atomic
 from dtd.training.run_dir import RunDir, read_config
 
 ASSETS = "report"
@@ -83,34 +83,34 @@ def write_report(
 
     run = RunDir(Path(run_dir))
     config = read_config(run)
-    assets_dir = run.root / ASSETS
-    ensure_writable(run.root, "the report")
-    ensure_writable(assets_dir, "the report's files")
-    assets: list[Path] = []
     curve = read_curve(run.root)
     sections = [_header(run, config, curve), _settings(config)]
-
-    if len(curve):
-        figures = draw(config.env or "", {config.algo.value: [curve]}, assets_dir / "curves")
-        assets += figures
-        picture = _image(figures[0], run.root, "eval success against epochs and env steps")
-        sections.append(_section("Training", picture))
-
     spec = json.loads(run.config.read_text()).get("derived", {}).get("spec", {})
-    if config.algo.sets_subgoals and spec.get("quaternion"):
-        sections.append(_section("The high level's values", _NO_MAP_FOR_ROTATIONS))
-    elif config.algo.sets_subgoals:
-        sections.append(_heatmap_section(run, checkpoint, resolution, assets))
+    written: list[Path] = []
+    # The files beside the page are written as a whole, before the page: a report that fails
+    # (a checkpoint that cannot be read, a full disk, Ctrl-C) leaves the one before it.
+    with staged(run.root / ASSETS, "the report") as assets_dir:
+        if len(curve):
+            figures = draw(config.env or "", {config.algo.value: [curve]}, assets_dir / "curves")
+            written += figures
+            picture = _image(figures[0], assets_dir, "eval success against epochs and env steps")
+            sections.append(_section("Training", picture))
 
-    rendered = render_run(run.root, episodes, assets_dir / "episodes", checkpoint, seed)
-    parts = []
-    for number, files in enumerate(rendered, start=1):
-        assets += [files.video, files.strip]
-        parts.append(
-            f"<h3>Episode {number}: {_outcome(files.plan['success'])}</h3>"
-            + _image(files.strip, run.root, f"key frames of episode {number}")
-            + f'<video controls preload="metadata" src="{_relative(files.video, run.root)}"></video>'
-        )
+        if config.algo.sets_subgoals and spec.get("quaternion"):
+            sections.append(_section("The high level's values", _NO_MAP_FOR_ROTATIONS))
+        elif config.algo.sets_subgoals:
+            sections.append(_heatmap_section(run, assets_dir, checkpoint, resolution, written))
+
+        rendered = render_run(run.root, episodes, assets_dir / "episodes", checkpoint, seed)
+        parts = []
+        for number, files in enumerate(rendered, start=1):
+            written += [files.video, files.strip]
+            parts.append(
+                f"<h3>Episode {number}: {_outcome(files.plan['success'])}</h3>"
+                + _image(files.strip, assets_dir, f"key frames of episode {number}")
+                + f'<video controls preload="metadata" src="{_relative(files.video, assets_dir)}"></video>'
+            )
+    assets = [run.root / ASSETS / path.relative_to(assets_dir) for path in written]
     planar = spec.get("goal_dim") == 2 and not spec.get("quaternion")
     legend = marker_legend(bool(spec.get("quaternion")), config.algo.sets_subgoals, planar).capitalize() + "."
     sections.append(_section("Episodes", f"<p>{legend}</p>" + "".join(parts)))
@@ -196,14 +196,16 @@ def _explore_note(run: RunDir, config: Any, rotation: bool) -> str:
     )
 
 
-def _heatmap_section(run: RunDir, checkpoint: str, resolution: int, assets: list[Path]) -> str:
+def _heatmap_section(
+    run: RunDir, assets_dir: Path, checkpoint: str, resolution: int, assets: list[Path]
+) -> str:
     from dtd.errors import EnvError
     from dtd.explain.heatmap import run_heatmaps
 
     checkpoints = ("first", checkpoint) if run.first.exists() and checkpoint != "first" else (checkpoint,)
     try:
         path, columns = run_heatmaps(
-            run.root, run.root / ASSETS / "heatmaps.png", checkpoints, resolution=resolution
+            run.root, assets_dir / "heatmaps.png", checkpoints, resolution=resolution
         )
     except EnvError as exc:
         return _section(
@@ -222,7 +224,7 @@ def _heatmap_section(run: RunDir, checkpoint: str, resolution: int, assets: list
         + (" Left: after the first epoch; right: at the checkpoint shown." if len(checkpoints) > 1 else "")
         + "</p>"
     )
-    picture = _image(path, run.root, "heatmaps of the high level's values")
+    picture = _image(path, assets_dir, "heatmaps of the high level's values")
     return _section("The high level's values", text + picture)
 
 
@@ -268,9 +270,10 @@ def _section(title: str, content: str) -> str:
     return f"<h2>{html.escape(title)}</h2>\n{content}"
 
 
-def _image(path: Path, root: Path, alt: str) -> str:
-    return f'<p><img src="{_relative(path, root)}" alt="{html.escape(alt)}"></p>'
+def _image(path: Path, assets_dir: Path, alt: str) -> str:
+    return f'<p><img src="{_relative(path, assets_dir)}" alt="{html.escape(alt)}"></p>'
 
 
-def _relative(path: Path, root: Path) -> str:
-    return html.escape(Path(path).resolve().relative_to(root.resolve()).as_posix())
+def _relative(path: Path, assets_dir: Path) -> str:
+    """The page's link to ``path``, written into ``assets_dir`` (while the files are staged)."""
+    return html.escape(f"{ASSETS}/{Path(path).relative_to(assets_dir).as_posix()}")

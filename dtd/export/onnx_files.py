@@ -26,7 +26,7 @@ from dtd.envs.make import env_kwargs
 from dtd.envs.spec import EnvSpec
 from dtd.errors import ConfigError, DtdError
 from dtd.export.paths import PolicyPath, SubgoalPath, SubgoalValuePath
-from dtd.training.atomic import ensure_writable, write_atomic, write_text_atomic
+from dtd.training.atomic import staged
 from dtd.training.run_dir import package_versions
 from dtd.training.trained_run import LoadedRun, load_run
 
@@ -157,12 +157,8 @@ def export_run(run_dir: Path, out: Path, checkpoint: str = "latest", force: bool
     with load_run(Path(run_dir), checkpoint) as loaded:
         agent, spec = loaded.agent, loaded.spec
         models = models_of(agent, spec)
-        if force and out.is_dir():
-            for model in models:
-                (out / model.file).unlink(missing_ok=True)
-        ensure_writable(out, "the exported models")
         rng = np.random.default_rng(0)
-        written, largest = [], 0.0
+        files, largest = {}, 0.0
         for model in models:
             data = onnx_bytes(model)
             difference = check_against_torch(model, data, rng)
@@ -171,15 +167,15 @@ def export_run(run_dir: Path, out: Path, checkpoint: str = "latest", force: bool
                     f"the exported {model.role} differs from the agent by {difference:.2e} (over {TOLERANCE})"
                 )
             largest = max(largest, difference)
-            path = out / model.file
-            write_atomic(path, lambda file, data=data: file.write(data))
-            written.append(path)
+            files[model.file] = data
         policy = describe(loaded, agent, spec, models, largest)
-        written.append(out / "policy.json")
-        write_text_atomic(written[-1], json.dumps(policy, indent=1) + "\n")
-        written.append(out / "README.md")
-        write_text_atomic(written[-1], readme(policy))
-    return Exported(out, written, policy, largest)
+    files["policy.json"] = (json.dumps(policy, indent=1) + "\n").encode()
+    files["README.md"] = readme(policy).encode()
+    # Every file or none: a full disk or an interrupt leaves --out as it was.
+    with staged(out, "the exported models") as folder:
+        for name, data in files.items():
+            (folder / name).write_bytes(data)
+    return Exported(out, [out / name for name in files], policy, largest)
 
 
 def describe(

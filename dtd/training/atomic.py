@@ -1,9 +1,17 @@
-"""Atomic file replacement: readers, and a crash at any moment, see the old file or the new one."""
+"""Atomic file replacement: readers, and a crash at any moment, see the old file or the new one.
+
+Every file dtd writes goes through here: one file by :func:`write_atomic` (a temporary renamed
+over it), the files of one command's output folder by :func:`staged` (written into a temporary
+folder beside it, moved in only when all are written). A command that fails or is interrupted
+leaves no partial file and no part of its output; a full disk is one :class:`MachineError`.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import os
-from collections.abc import Callable
+import shutil
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
@@ -85,14 +93,70 @@ class _RecordingWriter:
         return getattr(self.file, name)
 
 
+def temporary_beside(path: Path) -> Path:
+    """The name of ``path``'s temporary stand-in while this process writes it: hidden, beside
+    it, naming the process (so that a killed writer's are known, :func:`remove_stale_temporaries`)."""
+    return path.with_name(f".{path.name}.{os.getpid()}.tmp")
+
+
+@contextlib.contextmanager
+def staged(folder: Path, what: str) -> Iterator[Path]:
+    """A temporary folder beside ``folder`` for the block to write ``what`` into; when the block
+    ends without error its files move into ``folder`` (made where missing; a file of the same
+    name replaced, others left), each by a rename. On an error or an interrupt nothing of it
+    reaches ``folder``, and the temporary folder is removed. A failure of the machine (a full
+    disk) is a :class:`MachineError` naming the operating system's reason; a folder that cannot
+    be written a :class:`RunDirError`, before the block runs."""
+    folder = Path(folder)
+    with _staging(folder, what) as staging:
+        yield staging
+        for path in sorted(staging.rglob("*")):
+            if path.is_file():
+                target = folder / path.relative_to(staging)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(path, target)
+
+
+@contextlib.contextmanager
+def staged_file(path: Path, what: str) -> Iterator[Path]:
+    """:func:`staged` for one file: the block writes the path it is given, which replaces
+    ``path`` when the block ends without error."""
+    path = Path(path)
+    with _staging(path, what) as staging:
+        yield staging / path.name
+        os.replace(staging / path.name, path)
+
+
+@contextlib.contextmanager
+def _staging(target: Path, what: str) -> Iterator[Path]:
+    """A temporary folder beside ``target``, removed when the block ends; the machine's failures
+    in the block as a :class:`MachineError` about ``target``."""
+    staging = temporary_beside(target)
+    try:
+        ensure_writable(target.parent, what)
+        staging.mkdir()
+    except OSError as exc:
+        raise RunDirError(f"cannot write {what} into {target.parent}: {exc.strerror or exc}") from exc
+    try:
+        yield staging
+    except OSError as exc:
+        raise MachineError(machine_failure(exc, target)) from exc
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
 def remove_stale_temporaries(folder: Path) -> list[Path]:
-    """Delete the temporary files under ``folder`` that :func:`write_atomic` left behind when its
-    process was killed mid-write (their process no longer exists); return them."""
+    """Delete the temporary files and folders under ``folder`` that :func:`write_atomic` and
+    :func:`staged` left behind when their process was killed (their process no longer exists);
+    return them."""
     removed = []
-    for tmp in folder.rglob(".*.tmp"):
+    for tmp in list(folder.rglob(".*.tmp")):
         pid = tmp.name.rsplit(".", 2)[-2]
         if pid.isdigit() and not _process_exists(int(pid)):
-            tmp.unlink(missing_ok=True)
+            if tmp.is_dir():
+                shutil.rmtree(tmp, ignore_errors=True)
+            else:
+                tmp.unlink(missing_ok=True)
             removed.append(tmp)
     return removed
 

@@ -12,12 +12,15 @@ import logging
 import os
 import signal
 import sys
+import threading
+import time
 import uuid
 from collections.abc import Iterator, Mapping, Sequence
 
 LOCAL_LAUNCH = "DTD_LOCAL_WORKERS"
-"""Set in the environment of workers ``dtd train --workers N`` started on this machine: their
-launcher reports a lost worker or an interruption, so they stay quiet about it."""
+"""Set in the environment of workers ``dtd train --workers N`` started on this machine, to the
+process id of their launcher: it reports a lost worker or an interruption, so they stay quiet
+about it, and they stop when it ends (:func:`watch_launcher`)."""
 
 LOST_WORKER_EXIT = 75
 """Exit status of a locally launched worker that lost contact with the others (EX_TEMPFAIL)."""
@@ -37,6 +40,8 @@ class JobPlace:
     """Workers of the job on this machine (``LOCAL_WORLD_SIZE``), who share its cores."""
     launched_here: bool = False
     """Started by ``dtd train --workers N`` on this machine, whose launcher reports for it."""
+    launcher: int | None = None
+    """The process id of that launcher (:func:`watch_launcher`)."""
 
     @classmethod
     def from_environment(cls, environ: Mapping[str, str] = os.environ) -> JobPlace:
@@ -49,6 +54,7 @@ class JobPlace:
             rank=number("RANK") or 0,
             local_workers=max(number("LOCAL_WORLD_SIZE") or 1, 1),
             launched_here=LOCAL_LAUNCH in environ,
+            launcher=number(LOCAL_LAUNCH),
         )
 
     @property
@@ -111,7 +117,7 @@ def launch_local(args: Sequence[str], workers: int, threads: int, poll_s: float 
         monitor_interval=poll_s,
     )
     try:
-        with _worker_environment({LOCAL_LAUNCH: "1", "OMP_NUM_THREADS": str(threads)}):
+        with _worker_environment({LOCAL_LAUNCH: str(os.getpid()), "OMP_NUM_THREADS": str(threads)}):
             elastic_launch(config, sys.executable)("-m", "dtd", *args)
     except ChildFailedError as failed:
         by_time = sorted(failed.failures.items(), key=lambda item: item[1].timestamp)
@@ -120,6 +126,25 @@ def launch_local(args: Sequence[str], workers: int, threads: int, poll_s: float 
     except SignalException as stop:
         raise KeyboardInterrupt(f"the launcher got {stop.sigval.name}") from None
     return [WorkerEnd(rank, 0, 0) for rank in range(workers)]
+
+
+def watch_launcher(launcher: int, poll_s: float = 0.5, grace_s: float = 60.0) -> threading.Event:
+    """Stop this worker when its launcher ``launcher`` (its parent) ends, however it ended
+    (``kill -9`` too): the worker is sent SIGTERM, which stops it as Ctrl-C does, after its last
+    finished epoch; one that has not ended ``grace_s`` seconds later exits at once. The event
+    returned is set once the launcher is found gone."""
+    gone = threading.Event()
+
+    def watch() -> None:
+        while os.getppid() == launcher:
+            time.sleep(poll_s)
+        gone.set()
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(grace_s)
+        os._exit(INTERRUPTED_EXIT)
+
+    threading.Thread(target=watch, name="launcher-watch", daemon=True).start()
+    return gone
 
 
 def _quiet_agent() -> None:

@@ -6,10 +6,14 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
+import shutil
+from collections.abc import Collection
 from pathlib import Path
 from typing import Any
 
 from dtd.config import Preset, TrainConfig, flat_items, preset_config, with_algorithm_defaults
+from dtd.config.settings import DOT_TO_DOT_FIELDS
+from dtd.envs.make import env_kwargs
 from dtd.envs.spec import EnvSpec
 from dtd.errors import CheckpointError, ConfigError, RunDirError, WorkerLost
 from dtd.training.atomic import remove_stale_temporaries
@@ -26,6 +30,8 @@ from dtd.training.workers import SOLO, WorkerGroup, join_group, leave_group
 # Settings that may change when a run is resumed; any other must stay as the run began.
 RESUMABLE_SETTINGS = frozenset({"epochs", "threads", "collector", "explore_snapshots", "device"})
 _RESUMABLE_FLAGS = ", ".join("--" + name.replace("_", "-") for name in sorted(RESUMABLE_SETTINGS))
+DOT_TO_DOT_SETTINGS = frozenset(DOT_TO_DOT_FIELDS)
+"""Dot-to-Dot's settings (the high level's as ``high.<name>``), which only ``--algo dtd`` uses."""
 
 
 def default_run_dir(config: TrainConfig) -> Path:
@@ -34,24 +40,28 @@ def default_run_dir(config: TrainConfig) -> Path:
     return Path("runs") / f"{env}-{config.algo.value}-s{config.seed}"
 
 
-def resumed_config(stored: TrainConfig, given: TrainConfig) -> TrainConfig:
-    """The stored configuration, with the settings the user changed on the command line.
+def resumed_config(
+    stored: TrainConfig, given: TrainConfig, named: Collection[str] | None = None
+) -> TrainConfig:
+    """The stored configuration, with the settings the user gave.
 
-    A setting counts as given when it differs from the default of the preset given; only
-    RESUMABLE_SETTINGS may differ from the stored run (a batch or n-step the run left to its
-    algorithm may be given as what the algorithm chose).
+    ``named`` lists the settings given, by their names in :func:`flat_items` (the command line
+    knows them from the options typed); None takes those of ``given`` that differ from its
+    preset's defaults (``given`` built in Python, e.g. ``TrainConfig(epochs=80)``). A setting
+    given at the run's own value (or, for the batch and n-step a run left to its algorithm, at
+    what the algorithm chose) is accepted; another value only for RESUMABLE_SETTINGS, anything
+    else is a :class:`ConfigError`.
     """
-    if given.preset is not Preset.tuned and given.preset is not stored.preset:
-        raise ConfigError(
-            f"--preset cannot change when resuming (the run has {stored.preset.value!r}); "
-            f"only {_RESUMABLE_FLAGS} can"
-        )
-    defaults = flat_items(preset_config(given.preset))
-    stored_flat, given_flat = flat_items(stored), flat_items(given)
-    chosen = flat_items(with_algorithm_defaults(stored))
+    given_flat = flat_items(given)
+    if named is None:
+        defaults = flat_items(preset_config(given.preset))
+        named = {name for name, value in given_flat.items() if value != defaults[name]}
+        named |= {"preset"} if given.preset is not Preset.tuned else set()
+    stored_flat, chosen = flat_items(stored), flat_items(with_algorithm_defaults(stored))
     changes: dict[str, Any] = {}
-    for name, value in given_flat.items():
-        if value in (defaults[name], stored_flat[name], chosen[name]):
+    for name in sorted(named):
+        value = given_flat[name]
+        if _same_setting(name, value, stored_flat[name]) or _same_setting(name, value, chosen[name]):
             continue
         if name not in RESUMABLE_SETTINGS:
             raise ConfigError(
@@ -61,6 +71,23 @@ def resumed_config(stored: TrainConfig, given: TrainConfig) -> TrainConfig:
         changes[name] = value
     # Typed as config.json is read (the flat values are plain: an enum's is its text).
     return TrainConfig.from_dict({**stored.to_dict(), **changes})
+
+
+def _same_setting(name: str, given: Any, stored: Any) -> bool:
+    """Whether a setting given is the one stored: the environment's arguments as the values they
+    are read as (in any order, ``False`` as ``false``), the others as they are."""
+    if name == "env_kwargs":
+        return env_kwargs(given) == env_kwargs(stored)
+    return given == stored
+
+
+def settings_out_of_place(config: TrainConfig, named: Collection[str]) -> list[str]:
+    """The options among ``named`` (settings as :func:`flat_items` names them) that ``config``'s
+    algorithm has no use for: Dot-to-Dot's, given to another algorithm."""
+    if config.algo.sets_subgoals:
+        return []
+    unused = [name for name in sorted(named) if name.split(".")[0] in DOT_TO_DOT_SETTINGS]
+    return ["--" + name.replace("_", "-") for name in unused]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,18 +128,28 @@ def plan_start(
     resume: Path | str | None = None,
     force: bool = False,
     place: JobPlace = ALONE_HERE,
+    given: Collection[str] | None = None,
 ) -> StartPlan:
     """What :func:`train` would start or resume, checked before anything is built: the
     settings (a resumed run's read from its directory once) and the run directory; a
-    :class:`ConfigError` or :class:`RunDirError` where it cannot."""
+    :class:`ConfigError` or :class:`RunDirError` where it cannot. ``given`` names the settings
+    the user gave (:func:`resumed_config`); a new run refuses Dot-to-Dot's among them for
+    another algorithm."""
     if resume is not None:
         if run_dir is not None and Path(run_dir).resolve() != Path(resume).resolve():
             raise ConfigError("give the run directory once: --resume DIR (without --run-dir)")
         run = RunDir(Path(resume))
-        resumed = resumed_config(read_config(run), config)  # a missing or unreadable run is refused here
+        # A missing or unreadable run is refused here.
+        resumed = resumed_config(read_config(run), config, given)
         resumed.validate()
         return StartPlan(resumed, run, resuming=True)
     config.validate()
+    unused = settings_out_of_place(config, given or ())
+    if unused:
+        raise ConfigError(
+            f"{', '.join(unused)}: Dot-to-Dot's settings, which --algo {config.algo.value} does not use; "
+            "leave them out or train --algo dtd"
+        )
     # The thread count is part of what makes a run repeatable: the run records it. Under
     # torchrun the workers are the job's size.
     config = dataclasses.replace(
@@ -157,7 +194,11 @@ def train_planned(plan: StartPlan, show_progress: bool = True, place: JobPlace =
     try:
         # Every worker has looked at the run directory before any of them writes to it.
         group.barrier()
-        with holding(run.root) if group.writes else contextlib.nullcontext():
+        starting = group.writes and not plan.resuming
+        with (
+            holding(run.root) if group.writes else contextlib.nullcontext(),
+            run.starting(replace=plan.force) if starting else contextlib.nullcontext(),
+        ):
             components, state = _started(plan, group, place.local_workers)
             # A run trained to its end already has no components: nothing is built or written.
             if components is not None:
@@ -184,12 +225,12 @@ def _started(
         return build(settings, worker=group.rank, collective=group.collective, local_workers=local_workers)
 
     if not plan.resuming:
-        components = built()
-        if plan.force and group.writes:
-            run.clear()
-        return components, TrainState()
+        return built(), TrainState()
     if group.writes:
         remove_stale_temporaries(run.root)  # half-written files of the process that was killed
+        # A run set aside by a forced start that was killed before its first epoch: resuming
+        # the new run gives it up.
+        shutil.rmtree(run.set_aside, ignore_errors=True)
     # A run killed during its first epoch has no checkpoint yet: it starts again.
     latest = Checkpoint.read(run.latest) if run.latest.exists() else None
     if latest is not None:

@@ -14,13 +14,18 @@ checkpoints/epochs/    the agent alone (no replay, no optimiser) after epoch E
                        (epoch-E.pt), for dtd explore; see TrainConfig.explore_snapshots
 checkpoints/workers/   with data-parallel workers: worker k's replay and random state after
                        epoch E (worker-k-epoch-E.pt); latest.pt is worker 0's
+.replaced/             while a run started with --force has not finished its first epoch: the
+                       run it replaces, put back if the new one stops before then
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
+import os
 import shutil
+from collections.abc import Iterator
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -109,12 +114,53 @@ class RunDir:
         """Whether a run has already started here."""
         return self.config.exists() or self.metrics.exists() or self.checkpoints.exists()
 
+    @property
+    def set_aside(self) -> Path:
+        """Where a run replaced by a new one waits until the new one has finished an epoch."""
+        return self.root / ".replaced"
+
+    def run_files(self) -> tuple[Path, ...]:
+        """The files and folders a run writes (not what commands make from it: report, render)."""
+        return (self.config, self.metrics, self.final_evaluation, self.checkpoints, self.tensorboard)
+
     def clear(self) -> None:
-        """Remove a previous run's files (only those a run writes)."""
-        for path in (self.config, self.metrics):
-            path.unlink(missing_ok=True)
-        for path in (self.checkpoints, self.tensorboard):
-            shutil.rmtree(path, ignore_errors=True)
+        """Remove a run's files (only those a run writes)."""
+        for path in self.run_files():
+            if path.is_dir():
+                shutil.rmtree(path, ignore_errors=True)
+            else:
+                path.unlink(missing_ok=True)
+
+    @contextlib.contextmanager
+    def starting(self, replace: bool) -> Iterator[None]:
+        """A new run's start here, the run directory held by this process: a run already here
+        is set aside first where ``replace`` (``--force``), and removed once the block ends with
+        the new run's first checkpoint written. Should the block fail before that (a task
+        refused at its first episode, a full disk, Ctrl-C), the new run's files are removed and
+        the run set aside is put back: a start that does not get through its first epoch leaves
+        the directory as it found it."""
+        if self.set_aside.exists():  # left by a start that was killed before its first epoch
+            if replace and not self.latest.exists():
+                self.clear()  # that start's files; the run it replaced stays aside
+            else:
+                shutil.rmtree(self.set_aside)
+        if replace and self.holds_run():
+            self.set_aside.mkdir()
+            for path in self.run_files():
+                if path.exists():
+                    os.replace(path, self.set_aside / path.name)
+        try:
+            yield
+        except BaseException:
+            if not self.latest.exists():
+                self.clear()
+                if self.set_aside.exists():
+                    for path in self.set_aside.iterdir():
+                        os.replace(path, self.root / path.name)
+                    self.set_aside.rmdir()
+            raise
+        finally:
+            shutil.rmtree(self.set_aside, ignore_errors=True)
 
     def named(self, path: Path | str) -> str:
         """``path`` as a run's own files name it: relative to the run (``checkpoints/latest.pt``)

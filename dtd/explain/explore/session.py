@@ -28,7 +28,9 @@ from dtd.experiments.curves import read_curve
 from dtd.explain.heatmap import (
     PlacedStart,
     Table,
+    check_height,
     check_on_table,
+    check_resolution,
     place_block_and_goal,
     table_of,
     value_slice,
@@ -40,7 +42,6 @@ from dtd.training.trained_run import on_the_cpu
 
 MAP_RESOLUTION = 50
 """Cells along each side of the table in a value map, unless asked otherwise."""
-MAX_RESOLUTION = 200
 KEPT_STATES = 16
 """Epochs whose weights stay in memory (a FetchPush dtd epoch is about 1.7 MB)."""
 KEPT_VIDEOS = 20
@@ -160,13 +161,13 @@ class Explorer:
         began = time.perf_counter()
         if self.table is None:
             raise ExploreError(409, f"no value map for this run: {self.no_map_reason}")
-        if not 2 <= resolution <= MAX_RESOLUTION:
-            raise ExploreError(422, f"resolution must lie in 2..{MAX_RESOLUTION}, got {resolution}")
         table = self.table
         height = table.block_z if z is None else z
-        lowest, highest = table.block_z, table.block_z + 0.5
-        if not lowest <= height <= highest:
-            raise ExploreError(422, f"z {height:.3f} lies outside {lowest:.3f}..{highest:.3f} m")
+        try:
+            check_resolution(resolution, "resolution")
+            check_height(table, height, "z")
+        except ConfigError as exc:
+            raise ExploreError(422, str(exc)) from exc
         goal_point = self._goal_point(goal)
         snapshot = self._use_epoch(epoch)
         self._check_on_table(block, goal_point)
@@ -245,10 +246,10 @@ class Explorer:
             return (x, y)
         table = self.placement_table
         assert table is not None, "called only where the block and the goal can be placed"
-        if not table.block_z <= z <= table.block_z + 0.5:
-            raise ExploreError(
-                422, f"the goal's z {z:.3f} lies outside {table.block_z:.3f}..{table.block_z + 0.5:.3f} m"
-            )
+        try:
+            check_height(table, z, "the goal's z")
+        except ConfigError as exc:
+            raise ExploreError(422, str(exc)) from exc
         return (x, y, z)
 
     def _use_epoch(self, epoch: int) -> EpochSnapshot:

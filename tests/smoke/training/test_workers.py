@@ -149,6 +149,29 @@ def test_an_interrupted_job_stops_every_worker_in_one_line_and_resumes(tmp_path,
     assert [int(row["epoch"]) for row in read_metrics(run_dir)] == [1, 2, 3]
 
 
+def test_workers_whose_launcher_is_killed_stop_in_one_line_and_resume_finishes(tmp_path):
+    run_dir = tmp_path / "run"
+    launcher = job_after_its_first_epoch(run_dir, epochs=10_000)  # would train for a long time
+    workers = children(launcher.pid)
+    assert len(workers) == 2
+    os.kill(launcher.pid, signal.SIGKILL)
+    # The workers still hold the launcher's stderr: it ends when both have ended.
+    _, stderr = launcher.communicate(timeout=120)
+    deadline = time.monotonic() + 120  # a guard against a hang, not a measure of speed
+    while any(Path(f"/proc/{worker}").exists() for worker in workers):
+        assert time.monotonic() < deadline, f"workers {workers} outlived their launcher"
+        time.sleep(0.1)
+    lines = [line for line in stderr.splitlines() if not line.startswith("epoch ")]  # progress
+    assert lines == [
+        f"dtd: the launcher of this run's workers (pid {launcher.pid}) ended, so its workers stopped; "
+        f"continue with dtd train --resume {run_dir}"
+    ], stderr
+    trained = len(read_metrics(run_dir))
+    result = dtd("train", "--resume", run_dir, "--epochs", str(trained + 1))
+    assert result.returncode == 0, result.stderr
+    assert [int(row["epoch"]) for row in read_metrics(run_dir)] == list(range(1, trained + 2))
+
+
 LEAVING_WORKER = """
 import os
 import torch

@@ -111,3 +111,19 @@ def test_without_a_terminal_a_status_line_replaces_the_bar(tmp_path, monkeypatch
     with SweepProgress(trials, enabled=True, console=Console(file=terminal, force_terminal=True)) as bar:
         bar.refresh()
     assert "sweep:" not in terminal.getvalue()
+
+
+@pytest.mark.parametrize(
+    ("grid", "message"),
+    [
+        ("batch_size=0,32", "--grid batch_size=0: --batch-size must be at least 1"),
+        ("high.batch_size=0,32", "--high.batch-size must be at least 1"),
+        ("n_step=0", "--n-step must be at least 1"),
+        ("epochs=-1", "--epochs must be at least 1"),
+        ("batch_size=abc", "batch_size must be an integer"),
+    ],
+)
+def test_every_grid_value_is_checked_as_its_option_before_any_trial(tmp_path, grid, message):
+    with pytest.raises(ConfigError, match=message):
+        sweep_trials(TrainConfig(env="FetchPush-v4"), [Algo.her, Algo.dtd], 1, tmp_path, grid=[grid])
+    assert not (tmp_path / "FetchPush-v4-her-batch_size=0-s0").exists()

@@ -3,11 +3,20 @@ count and collector chosen for the machine."""
 
 import dataclasses
 from pathlib import Path
+from typing import Annotated
 
 import pytest
 import torch
+import tyro
 
-from dtd.config import Algo, Collection, Preset, TrainConfig, preset_config
+from dtd.cli.options import (
+    REQUIRED_ENV_UNLESS_RESUMED,
+    deferred,
+    parse_command,
+    settings_given,
+    settings_registry,
+)
+from dtd.config import Algo, Collection, LearnerKind, Preset, TrainConfig, preset_config
 from dtd.envs.spec import EnvSpec
 from dtd.errors import CheckpointError, ConfigError
 from dtd.training import components
@@ -147,3 +156,62 @@ def test_one_torch_thread_unless_asked_for_more(monkeypatch):
     assert components.resolved_threads(3) == 3
     monkeypatch.setenv("OMP_NUM_THREADS", "many")
     assert components.resolved_threads(0) == 1
+
+
+def test_resume_takes_what_the_command_line_gave_whatever_its_value():
+    learner = dataclasses.replace(VALID.learner, learner=LearnerKind.tqc, hidden_sizes=(64, 64))
+    stored = dataclasses.replace(VALID, algo=Algo.dtd, learner=learner, n_cycles=7, time_feature=True)
+    # The options typed, read from the command line: the default value is given all the same.
+    for args, option in [
+        (["--learner", "ddpg"], "--learner"),
+        (["--n-cycles", "50"], "--n-cycles"),
+        (["--hidden-sizes", "256", "256", "256"], "--hidden-sizes"),
+        (["--no-time-feature"], "--time-feature"),
+        (["--algo", "her"], "--algo"),
+        (["--preset", "paper"], "--preset"),
+    ]:
+        given = parsed_settings(args)
+        with pytest.raises(ConfigError, match=f"{option} cannot change when resuming"):
+            resumed_config(stored, given, settings_given(args))
+    # The run's own values again, and what may change.
+    own = ["--learner", "tqc", "--n-cycles", "7", "--time-feature", "--algo", "dtd", "--epochs", "80"]
+    assert resumed_config(stored, parsed_settings(own), settings_given(own)) == dataclasses.replace(
+        stored, epochs=80
+    )
+
+
+def test_resume_reads_the_environments_arguments_as_their_values():
+    stored = dataclasses.replace(VALID, env_kwargs=("continuing_task=false", "reward_type=sparse"))
+    again = ["--env-kwargs", "reward_type=sparse", "continuing_task=False"]
+    assert resumed_config(stored, parsed_settings(again), settings_given(again)) == stored
+    other = ["--env-kwargs", "reward_type=dense", "continuing_task=False"]
+    with pytest.raises(ConfigError, match="--env-kwargs cannot change"):
+        resumed_config(stored, parsed_settings(other), settings_given(other))
+
+
+def test_the_settings_given_are_read_from_the_options_typed():
+    args = [
+        "--n-cycles=50",
+        "--no-time-feature",
+        "--high.no-layer-norm",
+        "--learner",
+        "ddpg",
+        "--resume",
+        "r",
+    ]
+    assert settings_given([*args, "--no-progress", "--force"]) == {
+        "n_cycles", "time_feature", "high.layer_norm", "learner"
+    }  # fmt: skip
+
+
+def parsed_settings(args: list[str]) -> TrainConfig:
+    """The settings ``dtd train`` parses from ``args`` (without its own options)."""
+    settings = [arg for arg in args if arg not in ("--resume", "r")]
+    commands = {"train": deferred(_settings_of, TrainConfig()), "plot": deferred(_settings_of)}
+    registry = {"train": settings_registry(hints=REQUIRED_ENV_UNLESS_RESUMED)}
+    return parse_command(commands, "", ["train", "--env", "FetchReach-v4", *settings], registry)()
+
+
+def _settings_of(config: Annotated[TrainConfig, tyro.conf.arg(name="")]) -> TrainConfig:
+    """The settings parsed."""
+    return config
