@@ -108,7 +108,7 @@ def staged(folder: Path, what: str) -> Iterator[Path]:
     disk) is a :class:`MachineError` naming the operating system's reason; a folder that cannot
     be written a :class:`RunDirError`, before the block runs."""
     folder = Path(folder)
-    with _staging(folder, what) as staging:
+    with _staging(folder, what, lambda staging: staging) as staging:
         yield staging
         for path in sorted(staging.rglob("*")):
             if path.is_file():
@@ -122,15 +122,16 @@ def staged_file(path: Path, what: str) -> Iterator[Path]:
     """:func:`staged` for one file: the block writes the path it is given, which replaces
     ``path`` when the block ends without error."""
     path = Path(path)
-    with _staging(path, what) as staging:
+    with _staging(path, what, lambda staging: staging / path.name) as staging:
         yield staging / path.name
         os.replace(staging / path.name, path)
 
 
 @contextlib.contextmanager
-def _staging(target: Path, what: str) -> Iterator[Path]:
+def _staging(target: Path, what: str, stand_in: Callable[[Path], Path]) -> Iterator[Path]:
     """A temporary folder beside ``target``, removed when the block ends; the machine's failures
-    in the block as a :class:`MachineError` about ``target``."""
+    in the block as a :class:`MachineError` about ``target``, which ``stand_in(folder)`` stands
+    for until then (a file written there is named by where it was going)."""
     staging = temporary_beside(target)
     try:
         ensure_writable(target.parent, what)
@@ -141,6 +142,8 @@ def _staging(target: Path, what: str) -> Iterator[Path]:
         yield staging
     except OSError as exc:
         raise MachineError(machine_failure(exc, target)) from exc
+    except MachineError as exc:
+        raise MachineError(str(exc).replace(str(stand_in(staging)), str(target))) from exc
     finally:
         shutil.rmtree(staging, ignore_errors=True)
 
