@@ -41,7 +41,8 @@ def main(argv: list[str] | None = None) -> None:
     # Asked of the environment here alone: whether this process is a worker of a job.
     place = JobPlace.from_environment()
     # A worker started by dtd train --workers N ends with its launcher, never as an orphan.
-    orphaned = watch_launcher(place.launcher) if place.launched_here and place.launcher else None
+    if place.launched_here and place.launcher is not None:
+        watch_launcher(place.launcher)
     # The preset supplies the defaults the other options override, so it is read first.
     preset = preset_config(preset_named(args))
     commands = {
@@ -74,7 +75,8 @@ def main(argv: list[str] | None = None) -> None:
         print(f"dtd: error: {exc}", file=sys.stderr)
         sys.exit(2)
     except WorkerLost as exc:
-        if orphaned is not None and orphaned.is_set():
+        # Asked now, not of the watch: the others may have stopped before it saw the launcher go.
+        if place.launcher_gone():
             _report_orphaned(place, args, exc)
             sys.exit(INTERRUPTED_EXIT)
         # A worker dtd started here leaves the report to its launcher, which knows who died.
@@ -86,7 +88,7 @@ def main(argv: list[str] | None = None) -> None:
         print(f"dtd: error: {exc}", file=sys.stderr)
         sys.exit(1)
     except KeyboardInterrupt as exc:
-        if orphaned is not None and orphaned.is_set():
+        if place.launcher_gone():
             _report_orphaned(place, args, exc)
         elif place.reports_for_itself:
             print(f"dtd: interrupted{_how_to_continue(args, exc)}", file=sys.stderr)

@@ -23,6 +23,7 @@ from pathlib import Path
 
 from dtd.config import Collection, TrainConfig
 from dtd.errors import DtdError
+from dtd.training.launch import on_parent_gone
 
 LOG_NAME = "train.log"
 """File in a trial's run directory that receives what its training writes to stderr."""
@@ -203,13 +204,7 @@ def _start_worker(parent: int) -> None:
 
     signal.signal(signal.SIGINT, interrupt)
     signal.signal(signal.SIGTERM, interrupt)
-
-    def watch() -> None:
-        while os.getppid() == parent:
-            time.sleep(0.25)
-        os._exit(1)
-
-    threading.Thread(target=watch, daemon=True, name="exit-with-parent").start()
+    on_parent_gone(parent, lambda: os._exit(1), poll_s=0.25)
 
 
 def run_ray(

@@ -25,7 +25,7 @@ def write_atomic(path: Path, write: Callable[[IO[bytes]], None]) -> None:
     the operating system's reason and ``path``, even where the writer (``torch.save``) buries
     that reason in an error of its own; ``path`` is then left as it was.
     """
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp = temporary_beside(path)
     recorded = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)

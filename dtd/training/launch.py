@@ -15,7 +15,7 @@ import sys
 import threading
 import time
 import uuid
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 
 LOCAL_LAUNCH = "DTD_LOCAL_WORKERS"
 """Set in the environment of workers ``dtd train --workers N`` started on this machine, to the
@@ -56,6 +56,10 @@ class JobPlace:
             launched_here=LOCAL_LAUNCH in environ,
             launcher=number(LOCAL_LAUNCH),
         )
+
+    def launcher_gone(self) -> bool:
+        """Whether this worker's launcher has ended (it is no longer this process's parent)."""
+        return self.launched_here and self.launcher is not None and os.getppid() != self.launcher
 
     @property
     def in_job(self) -> bool:
@@ -128,23 +132,29 @@ def launch_local(args: Sequence[str], workers: int, threads: int, poll_s: float 
     return [WorkerEnd(rank, 0, 0) for rank in range(workers)]
 
 
-def watch_launcher(launcher: int, poll_s: float = 0.5, grace_s: float = 60.0) -> threading.Event:
-    """Stop this worker when its launcher ``launcher`` (its parent) ends, however it ended
-    (``kill -9`` too): the worker is sent SIGTERM, which stops it as Ctrl-C does, after its last
-    finished epoch; one that has not ended ``grace_s`` seconds later exits at once. The event
-    returned is set once the launcher is found gone."""
-    gone = threading.Event()
+def on_parent_gone(parent: int, act: Callable[[], None], poll_s: float = 0.5) -> None:
+    """Call ``act``, in a daemon thread, once this process's parent is no longer ``parent``
+    (it ended, however: ``kill -9`` too, and this process was handed to another)."""
 
     def watch() -> None:
-        while os.getppid() == launcher:
+        while os.getppid() == parent:
             time.sleep(poll_s)
-        gone.set()
+        act()
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
+def watch_launcher(launcher: int, poll_s: float = 0.5, grace_s: float = 60.0) -> None:
+    """Stop this worker when its launcher ``launcher`` (its parent) ends, however it ended
+    (``kill -9`` too): the worker is sent SIGTERM, which stops it as Ctrl-C does, after its last
+    finished epoch; one that has not ended ``grace_s`` seconds later exits at once."""
+
+    def stop() -> None:
         os.kill(os.getpid(), signal.SIGTERM)
         time.sleep(grace_s)
         os._exit(INTERRUPTED_EXIT)
 
-    threading.Thread(target=watch, name="launcher-watch", daemon=True).start()
-    return gone
+    on_parent_gone(launcher, stop, poll_s)
 
 
 def _quiet_agent() -> None:
