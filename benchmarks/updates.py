@@ -1,6 +1,7 @@
-"""Update speed of each learner (ddpg, td3, sac, tqc): ms per update for the given networks
-and batch, and the FLOPs one update needs against this machine's float32 matrix-multiply rate
-measured in the same run.
+"""Update speed of each learner (ddpg, td3, sac, tqc) in float32 and in bfloat16 (the networks'
+passes under autocast, as ``--precision bfloat16`` runs them): ms per update for the given
+networks and batch, and the FLOPs one update needs against this machine's matrix-multiply rate
+in each format, measured in the same run.
 
     python benchmarks/updates.py --updates 300
     python benchmarks/updates.py --learners tqc --hidden-sizes 512 512 512 --batch-size 512
@@ -24,6 +25,7 @@ from dtd.agents.records import Batch
 from dtd.config import LearnerConfig, LearnerKind
 
 OBS, GOAL, ACT = 25, 3, 4  # FetchPush
+DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16}
 
 
 def random_batch(rng: np.random.Generator, size: int) -> Batch:
@@ -36,9 +38,9 @@ def random_batch(rng: np.random.Generator, size: int) -> Batch:
     )
 
 
-def matmul_rate(n: int, seconds: float = 2.0) -> float:
-    """float32 FLOP/s of an n x n by n x n product, repeated for about ``seconds``."""
-    a, b = torch.randn(n, n), torch.randn(n, n)
+def matmul_rate(n: int, dtype: torch.dtype = torch.float32, seconds: float = 2.0) -> float:
+    """FLOP/s of an n x n by n x n product in ``dtype``, repeated for about ``seconds``."""
+    a, b = torch.randn(n, n, dtype=dtype), torch.randn(n, n, dtype=dtype)
     torch.mm(a, b)
     count, start = 0, time.perf_counter()
     while time.perf_counter() - start < seconds:
@@ -56,43 +58,46 @@ def main() -> None:
     parser.add_argument("--learners", nargs="+", default=[kind.value for kind in LearnerKind])
     parser.add_argument("--hidden-sizes", type=int, nargs="+", default=list(LearnerConfig.hidden_sizes))
     parser.add_argument("--batch-size", type=int, default=LearnerConfig.batch_size)
-    parser.add_argument("--compile", action="store_true", help="also time torch.compile'd networks")
+    parser.add_argument("--precisions", nargs="+", default=list(DTYPES), choices=list(DTYPES))
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
 
     base = LearnerConfig(hidden_sizes=tuple(args.hidden_sizes), batch_size=args.batch_size)
     rng = np.random.default_rng(0)
     batches = [random_batch(rng, base.batch_size) for _ in range(args.updates)]
-    big, layer = matmul_rate(1024), matmul_rate(256)
+    width = max(base.hidden_sizes)
+    peaks = {name: matmul_rate(1024, DTYPES[name]) for name in args.precisions}
+    layers = {name: matmul_rate(width, DTYPES[name]) for name in args.precisions}
     print(f"# updates, {base.hidden_sizes} hidden, batch {base.batch_size}, "
           f"{args.threads} torch thread(s), {platform.machine()}, torch {torch.__version__}")  # fmt: skip
-    print(f"float32 matmul 1024^3 {big / 1e9:.2f} GFLOP/s, 256^3 {layer / 1e9:.2f} GFLOP/s")
-    print("| learner | mode | MFLOP per update | ms per update | GFLOP/s | of 1024^3 peak | of 256^3 |")
-    print("|---|---|---|---|---|---|---|")
+    for name in args.precisions:
+        big, layer = peaks[name] / 1e9, layers[name] / 1e9
+        print(f"{name} matmul 1024^3 {big:.1f} GFLOP/s, {width}^3 {layer:.1f} GFLOP/s")
+    columns = "MFLOP per update | ms per update | x float32 | GFLOP/s | of 1024^3"
+    print(f"| learner | precision | {columns} | of {width}^3 |")
+    print("|---|---|---|---|---|---|---|---|")
     for name in args.learners:
         config = dataclasses.replace(base, learner=LearnerKind(name))
-        learner = fresh_learner(config, rng)
-        with FlopCounterMode(display=False) as counter:
-            learner.update(batches[0])
-        flops = counter.get_total_flops()
-        rates = {"eager": (update_rate(learner, batches), 0.0)}
-        if args.compile:
-            learner = fresh_learner(config, rng)
-            learner.compile()
-            start = time.perf_counter()
-            learner.update(batches[0])
-            learner.update(batches[1])  # the actor's own graph, compiled at its second use
-            compile_s = time.perf_counter() - start
-            rates["compiled"] = (update_rate(learner, batches), compile_s)
-        for mode, (rate, compile_s) in rates.items():
+        float32_ms = None
+        for precision in args.precisions:
+            learner = fresh_learner(config, rng, DTYPES[precision])
+            with FlopCounterMode(display=False) as counter:
+                learner.update(batches[0])
+            flops = counter.get_total_flops()
+            rate = update_rate(learner, batches)
+            ms = 1000 / rate
+            float32_ms = ms if precision == "float32" else float32_ms
+            speedup = f"{float32_ms / ms:.2f}" if float32_ms else "-"
             achieved = rate * flops
-            note = f" (compiling {compile_s:.0f} s)" if compile_s else ""
-            print(f"| {name} | {mode}{note} | {flops / 1e6:.1f} | {1000 / rate:.2f} | "
-                  f"{achieved / 1e9:.2f} | {achieved / big:.1%} | {achieved / layer:.1%} |")  # fmt: skip
+            shares = f"{achieved / peaks[precision]:.1%} | {achieved / layers[precision]:.1%}"
+            measured = f"{flops / 1e6:.1f} | {ms:.2f} | {speedup} | {achieved / 1e9:.1f}"
+            print(f"| {name} | {precision} | {measured} | {shares} |")
 
 
-def fresh_learner(config: LearnerConfig, rng: np.random.Generator) -> GoalLearner:
-    learner = make_learner(OBS, GOAL, ACT, BoxActionHead(1.0), config, gamma=0.98, sparse_rewards=(-1.0, 0.0))
+def fresh_learner(
+    config: LearnerConfig, rng: np.random.Generator, precision: torch.dtype = torch.float32
+) -> GoalLearner:
+    learner = make_learner(OBS, GOAL, ACT, BoxActionHead(1.0), config, 0.98, (-1.0, 0.0), precision=precision)
     learner.update_normalizers(rng.normal(size=(1000, OBS)), rng.normal(size=(1000, GOAL)))
     return learner
 

@@ -1,9 +1,12 @@
 """What every learner shares: the inputs as the networks see them (clipped, normalised o || g),
-the head that makes the actor's unit output an action, acting and valuing, the Polyak targets,
-and the plain-data state. Each learner (DDPG, TD3, SAC, TQC) adds its networks and its update."""
+the head that makes the actor's unit output an action, acting and valuing, one update (the TD
+target, the critics' step, the actor's step, their order and delay, the precision they run in),
+the Polyak targets, and the plain-data state. Each learner (DDPG, TD3, SAC, TQC) adds its
+networks, its value of the next state, its critic loss and its actor loss."""
 
 from __future__ import annotations
 
+import contextlib
 import copy
 from typing import Any, NamedTuple
 
@@ -47,7 +50,8 @@ class GoalLearner:
     caller's concern. With fellow data-parallel workers (``collective``), each update's
     gradients and the normalisers' statistics are theirs combined, so every worker's
     parameters stay the same. Networks, optimisers and batches live on ``device``; what
-    :meth:`act` and :meth:`q_values` return is on the CPU.
+    :meth:`act` and :meth:`q_values` return is on the CPU. With ``precision`` bfloat16 the
+    networks' passes of an update run in bfloat16 (see :meth:`update`); acting is float32.
     """
 
     stochastic = False
@@ -64,11 +68,14 @@ class GoalLearner:
         sparse_rewards: SparseRewards,
         collective: Collective = ALONE,
         device: torch.device | str = "cpu",
+        precision: torch.dtype = torch.float32,
     ) -> None:
         self.config = config
         self.collective = collective
         self.gamma = gamma
         self.device = torch.device(device)
+        self.precision = precision
+        """The dtype of the networks' passes in an update: float32, or bfloat16 (autocast)."""
         self.action_dim = action_dim
         # A sparse reward bounds the return (-1/0 per step: to [-1/(1-gamma), 0]); a dense one is
         # not clipped, rather than clipped to a range it does not have.
@@ -92,11 +99,10 @@ class GoalLearner:
         self.critic_optim = torch.optim.Adam(self.critic.parameters(), lr=config.critic_lr, fused=True)
         self._actor_params = list(self.actor.parameters())
         self._critic_params = list(self.critic.parameters())
-        # What update() runs: the networks themselves, or compiled views of them (compile()).
-        self._train_nets: dict[str, nn.Module] = {"actor": self.actor, "critic": self.critic}
-        self._train_nets["critic_target"] = self.critic_target
-        if self.actor_target is not None:
-            self._train_nets["actor_target"] = self.actor_target
+        self.updates = 0
+        """Updates so far: the actor steps on every ``actor_delay``-th."""
+
+    # What each learner supplies.
 
     def _networks(self, input_dim: int, action_dim: int) -> tuple[nn.Module, nn.Module]:
         """The actor and the critic (or critics, as one module) of this learner."""
@@ -105,18 +111,105 @@ class GoalLearner:
     def _uses_actor_target(self) -> bool:
         return True
 
+    @property
+    def actor_delay(self) -> int:
+        """The actor steps once every this many updates (of the critics)."""
+        return 1
+
     def _value(self, critic: nn.Module, inputs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         """(N,) the value of ``action`` the actor climbs, from ``critic``'s output."""
         raise NotImplementedError
 
-    def update(self, batch: Batch) -> dict[str, float]:
-        """One gradient step on ``batch``; returns diagnostics."""
+    def _critic_values(self, critic: nn.Module, inputs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        """(N, critics, ...) what ``critic`` says of ``action``: each critic's value (or atoms)."""
         raise NotImplementedError
 
-    def compile(self) -> None:
-        """Make :meth:`update` run ``torch.compile``d networks (same parameters; acting stays
-        eager). The first updates then take about a minute to compile, once per process."""
-        self._train_nets = {name: torch.compile(net) for name, net in self._train_nets.items()}
+    def _next_value(self, step: StepTensors) -> torch.Tensor:
+        """(N, K) what the target bootstraps from at the next state: the target networks' value of
+        the next action (a known one where the batch gives it), K atoms of it for a distributional
+        critic, an entropy bonus included for a stochastic policy."""
+        raise NotImplementedError
+
+    def _critic_loss(self, values: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        """The critics' loss of ``values`` (:meth:`_critic_values`) against ``target`` (N, K)."""
+        # Each critic's own mean squared error, summed: each learns at the rate of one alone.
+        return torch.square(values.flatten(1) - target).mean(dim=0).sum()
+
+    def _actor_objective(
+        self, inputs: torch.Tensor, obs: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """(N,) what the actor minimises per row before its action penalty, the unit actions it
+        chose and their log density (None for a deterministic actor): minus the critic's value."""
+        action, unit = self._policy(self.actor, inputs, obs)
+        return -self._value(self.critic, inputs, action), unit, None
+
+    def _after_actor_step(self, log_prob: torch.Tensor | None) -> dict[str, float]:
+        """Anything that steps with the actor (e.g. a temperature); ``None``: this worker had no
+        row for the actor. Returns its diagnostics."""
+        return {}
+
+    # One update, the same for every learner.
+
+    def update(self, batch: Batch) -> dict[str, float]:
+        """One step of the critic(s) toward the TD target and, on every ``actor_delay``-th update,
+        one of the actor up the critic (the critic after its own step; with ``actor_after_critic``
+        off the same critic as the critic's step saw, as baselines' HER); returns diagnostics.
+
+        In bfloat16 precision the networks' forward and backward passes run in bfloat16; the
+        parameters, Adam's state, the normalised inputs, the target, its clip and the losses stay
+        float32."""
+        step = self.step_tensors(batch)
+        target = self.target(step)
+        with self._lowered():
+            values = self._critic_values(self.critic, step.inputs, step.action).float()
+        critic_loss = self._critic_loss(values, target)
+        self.updates += 1
+        actor_due = self.updates % self.actor_delay == 0
+        actor_metrics: dict[str, float] = {}
+        if actor_due and not self.config.actor_after_critic:
+            actor_metrics = self._actor_step(step)
+        self._step(self._critic_params, self.critic_optim, critic_loss)
+        if actor_due and self.config.actor_after_critic:
+            actor_metrics = self._actor_step(step)
+        return {
+            "critic_loss": critic_loss.item(),
+            "q_mean": values.detach().mean().item(),
+            "target_mean": target.mean().item(),
+            **actor_metrics,
+        }
+
+    @torch.no_grad()
+    def target(self, step: StepTensors) -> torch.Tensor:
+        """(N, K) r + discount * the next state's value (a known value where the batch gives
+        it), clipped to the return's range."""
+        with self._lowered():
+            next_value = self._next_value(step).float()
+        if step.next_value is not None and step.next_value_given is not None:
+            next_value = torch.where(step.next_value_given[:, None], step.next_value[:, None], next_value)
+        target = step.reward[:, None] + step.discount[:, None] * next_value
+        return torch.clamp(target, *self.return_bounds)
+
+    def _actor_step(self, step: StepTensors) -> dict[str, float]:
+        """One step of the actor on its rows of the batch (all without ``actor_rows``): its
+        objective plus the penalty on its squared unit action."""
+        learning = self._actor_rows(step.inputs, step.obs, step.actor_rows)
+        if learning is None:
+            self._step(self._actor_params, self.actor_optim, None)
+            return self._after_actor_step(None)
+        # A context of its own: autocast's bfloat16 copies of the critic are not those of before
+        # its step.
+        with self._lowered():
+            objective, unit, log_prob = self._actor_objective(*learning)
+        penalty = torch.mean(torch.square(unit.float()))
+        loss = objective.float().mean() + self.config.action_l2 * penalty
+        self._step(self._actor_params, self.actor_optim, loss)
+        return {"actor_loss": loss.item(), **self._after_actor_step(log_prob)}
+
+    def _lowered(self) -> contextlib.AbstractContextManager:
+        """Where the networks run in the update's precision (nothing to do for float32)."""
+        if self.precision == torch.float32:
+            return contextlib.nullcontext()
+        return torch.autocast(self.device.type, dtype=self.precision)
 
     def tensor(self, values: np.ndarray | torch.Tensor) -> torch.Tensor:
         """``values`` as a float32 tensor on the learner's device (a tensor there passes through
@@ -282,11 +375,13 @@ class GoalLearner:
         self.critic.load_state_dict(state["critic"])
 
     def _training_state(self) -> dict[str, Any]:
-        """What only training needs beside targets and optimisers (e.g. a temperature)."""
-        return {}
+        """What only training needs beside targets and optimisers: the count of updates (and
+        e.g. a temperature)."""
+        return {"updates": self.updates}
 
     def _load_training_state(self, state: dict[str, Any]) -> None:
-        pass
+        # A checkpoint of a learner without an actor delay may have no count.
+        self.updates = int(state.get("updates", 0))
 
     def state_dict(self) -> dict[str, Any]:
         """Plain data: the acting state plus critic, target networks and optimisers."""

@@ -31,7 +31,11 @@ def make_learner(
     sparse_rewards: SparseRewards,
     collective: Collective = ALONE,
     device: torch.device | str = "cpu",
+    precision: torch.dtype = torch.float32,
 ) -> GoalLearner:
-    """The ``config.learner`` learner of actions ``head`` makes from o || g."""
+    """The ``config.learner`` learner of actions ``head`` makes from o || g, its updates'
+    passes in ``precision`` (float32 or bfloat16)."""
     kind = LEARNERS[config.learner]
-    return kind(obs_dim, goal_dim, action_dim, head, config, gamma, sparse_rewards, collective, device)
+    return kind(
+        obs_dim, goal_dim, action_dim, head, config, gamma, sparse_rewards, collective, device, precision
+    )

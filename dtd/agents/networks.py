@@ -4,7 +4,7 @@ actor's output in [-1, 1] into an action of the level that uses it."""
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import torch
 from torch import nn
@@ -12,9 +12,16 @@ from torch import nn
 from dtd.agents.normalizer import RunningNormalizer
 
 
-def mlp(in_dim: int, hidden_sizes: Sequence[int], out_dim: int, layer_norm: bool = False) -> nn.Sequential:
+def mlp(
+    in_dim: int,
+    hidden_sizes: Sequence[int],
+    out_dim: int,
+    layer_norm: bool = False,
+    float32_output: bool = False,
+) -> nn.Sequential:
     """ReLU perceptron with the given hidden widths and a linear output; with ``layer_norm``
-    each hidden layer is normalised (LayerNorm) before its ReLU."""
+    each hidden layer is normalised (LayerNorm) before its ReLU; with ``float32_output`` the
+    output layer stays float32 under autocast (:class:`Float32Linear`)."""
     layers: list[nn.Module] = []
     width = in_dim
     for hidden in hidden_sizes:
@@ -23,8 +30,26 @@ def mlp(in_dim: int, hidden_sizes: Sequence[int], out_dim: int, layer_norm: bool
             layers.append(nn.LayerNorm(hidden))
         layers.append(nn.ReLU())
         width = hidden
-    layers.append(nn.Linear(width, out_dim))
+    layers.append((Float32Linear if float32_output else nn.Linear)(width, out_dim))
     return nn.Sequential(*layers)
+
+
+def outside_autocast(inputs: torch.Tensor, forward: Callable[[torch.Tensor], torch.Tensor]) -> torch.Tensor:
+    """``forward(inputs)`` in float32 even where autocast lowers the precision around it."""
+    device = inputs.device.type
+    if not torch.is_autocast_enabled(device):
+        return forward(inputs)
+    with torch.autocast(device, enabled=False):
+        return forward(inputs.float())
+
+
+class Float32Linear(nn.Linear):
+    """A linear layer computed in float32 under autocast: a critic's output. A value of about
+    -15 is held by bfloat16 to steps of 1/16, as large as the TD errors late in training; the
+    layer's product (hidden width x outputs) is a sliver of the network's cost."""
+
+    def forward(self, inputs: torch.Tensor) -> torch.Tensor:
+        return outside_autocast(inputs, super().forward)
 
 
 def xavier_initialise(module: nn.Module) -> None:
@@ -61,7 +86,7 @@ class Critic(nn.Module):
         self, input_dim: int, action_features: int, hidden_sizes: Sequence[int], layer_norm: bool = False
     ) -> None:
         super().__init__()
-        self.body = mlp(input_dim + action_features, hidden_sizes, 1, layer_norm)
+        self.body = mlp(input_dim + action_features, hidden_sizes, 1, layer_norm, float32_output=True)
 
     def forward(self, inputs: torch.Tensor, action_features: torch.Tensor) -> torch.Tensor:
         return self.body(torch.cat([inputs, action_features], dim=-1)).squeeze(-1)
@@ -132,8 +157,10 @@ class EnsembleLinear(nn.Module):
     """``members`` independent linear layers applied in one batched matmul: (N, B, in) to
     (N, B, out). Each member is initialised as ``nn.Linear`` initialises one layer."""
 
-    def __init__(self, members: int, in_dim: int, out_dim: int) -> None:
+    def __init__(self, members: int, in_dim: int, out_dim: int, float32: bool = False) -> None:
         super().__init__()
+        self.float32 = float32
+        """Computed in float32 under autocast, as :class:`Float32Linear`."""
         self.weight = nn.Parameter(torch.empty(members, in_dim, out_dim))
         self.bias = nn.Parameter(torch.empty(members, 1, out_dim))
         bound = 1.0 / in_dim**0.5
@@ -141,6 +168,11 @@ class EnsembleLinear(nn.Module):
         nn.init.uniform_(self.bias, -bound, bound)
 
     def forward(self, inputs: torch.Tensor) -> torch.Tensor:
+        if self.float32:
+            return outside_autocast(inputs, self._product)
+        return self._product(inputs)
+
+    def _product(self, inputs: torch.Tensor) -> torch.Tensor:
         return torch.baddbmm(self.bias, inputs, self.weight)
 
 
@@ -180,7 +212,7 @@ class CriticEnsemble(nn.Module):
                 layers.append(EnsembleLayerNorm(members, hidden))
             layers.append(nn.ReLU())
             width = hidden
-        layers.append(EnsembleLinear(members, width, outputs))
+        layers.append(EnsembleLinear(members, width, outputs, float32=True))
         self.body = nn.Sequential(*layers)
 
     def forward(self, inputs: torch.Tensor, action_features: torch.Tensor) -> torch.Tensor:

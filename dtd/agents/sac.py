@@ -12,7 +12,6 @@ from torch import nn
 
 from dtd.agents.learner import GoalLearner, StepTensors
 from dtd.agents.networks import CriticEnsemble, GaussianActor
-from dtd.agents.records import Batch
 
 
 class SACLearner(GoalLearner):
@@ -49,17 +48,16 @@ class SACLearner(GoalLearner):
         """Values each critic gives of an action (1: its Q-value)."""
         return 1
 
+    def _critic_values(self, critic: nn.Module, inputs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        """(N, critics, outputs) each critic's value (or quantiles) of ``action``."""
+        return critic(inputs, self._features(action))
+
     def _value(self, critic: nn.Module, inputs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
-        return critic(inputs, self._features(action)).squeeze(-1).min(dim=1).values
+        return self._critic_values(critic, inputs, action).squeeze(-1).min(dim=1).values
 
     def _next_atoms(self, critic: nn.Module, inputs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         """(N, K) what the target bootstraps from at the next state: SAC's lowest critic (K = 1)."""
         return self._value(critic, inputs, action)[:, None]
-
-    def _critic_loss(self, values: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-        """The critics' loss of ``values`` (N, critics, outputs) against ``target`` (N, K)."""
-        # Each critic's own mean squared error, summed: each learns at the rate of one alone.
-        return torch.square(values.squeeze(-1) - target).mean(dim=0).sum()
 
     @property
     def temperature(self) -> torch.Tensor:
@@ -68,66 +66,38 @@ class SACLearner(GoalLearner):
 
     def _sample(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         noise = torch.randn(inputs.shape[0], self.action_dim, device=self.device)
-        return self._train_nets["actor"].sample(inputs, noise)
+        return self.actor.sample(inputs, noise)
 
-    @torch.no_grad()
-    def target(self, step: StepTensors) -> torch.Tensor:
-        """(N, K) r + discount * (atoms at the next state - alpha * log pi(a'|o', g)), clipped to
-        the return's range. A known next action replaces the sampled one (and has no entropy: no
-        policy chose it); a known next value replaces the atoms."""
+    def _next_value(self, step: StepTensors) -> torch.Tensor:
+        """The atoms at the next state less alpha * log pi(a'|o', g). A known next action
+        replaces the sampled one and has no entropy term: no policy chose it."""
         unit, log_prob = self._sample(step.next_inputs)
         next_action = self._given_next_action(step, self.head(unit, step.next_obs))
         if step.next_action_given is not None:
             log_prob = torch.where(step.next_action_given, torch.zeros_like(log_prob), log_prob)
-        atoms = self._next_atoms(self._train_nets["critic_target"], step.next_inputs, next_action)
-        atoms = atoms - self.temperature * log_prob[:, None]
-        if step.next_value is not None and step.next_value_given is not None:
-            atoms = torch.where(step.next_value_given[:, None], step.next_value[:, None], atoms)
-        target = step.reward[:, None] + step.discount[:, None] * atoms
-        return torch.clamp(target, *self.return_bounds)
+        atoms = self._next_atoms(self.critic_target, step.next_inputs, next_action)
+        return atoms - self.temperature * log_prob[:, None]
 
-    def update(self, batch: Batch) -> dict[str, float]:
-        """One step of the critics, the actor and the temperature; returns diagnostics."""
-        step = self.step_tensors(batch)
-        target = self.target(step)
-        values = self._train_nets["critic"](step.inputs, self._features(step.action))
-        critic_loss = self._critic_loss(values, target)
-        if not self.config.actor_after_critic:
-            actor_metrics = self._actor_step(step)
-        self._step(self._critic_params, self.critic_optim, critic_loss)
-        if self.config.actor_after_critic:
-            actor_metrics = self._actor_step(step)
-        return {
-            "critic_loss": critic_loss.item(),
-            "q_mean": values.detach().mean().item(),
-            "target_mean": target.mean().item(),
-            **actor_metrics,
-        }
+    def _actor_objective(
+        self, inputs: torch.Tensor, obs: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """alpha * log pi(a|o, g) - the critics' value of a sampled action a."""
+        unit, log_prob = self._sample(inputs)
+        value = self._value(self.critic, inputs, self.head(unit, obs))
+        return self.temperature * log_prob - value, unit, log_prob
 
-    def _actor_step(self, step: StepTensors) -> dict[str, float]:
-        """One step of the actor up the critics' value plus the entropy bonus (less the action
-        penalty), then one of the temperature toward the target entropy."""
-        learning = self._actor_rows(step.inputs, step.obs, step.actor_rows)
-        if learning is None:
-            self._step(self._actor_params, self.actor_optim, None)
+    def _after_actor_step(self, log_prob: torch.Tensor | None) -> dict[str, float]:
+        """One step of the temperature toward the target entropy."""
+        if log_prob is None:
             self._step([self.log_temperature], self.temperature_optim, None)
             return {}
-        inputs, obs = learning
-        unit, log_prob = self._sample(inputs)
-        value = self._value(self._train_nets["critic"], inputs, self.head(unit, obs))
-        actor_loss = torch.mean(self.temperature * log_prob - value)
-        actor_loss = actor_loss + self.config.action_l2 * torch.mean(torch.square(unit))
-        self._step(self._actor_params, self.actor_optim, actor_loss)
         # d/d(log alpha) of -log alpha * (log pi + target entropy): alpha falls while the policy's
         # entropy is above the target, and rises when below.
-        entropy_gap = log_prob.detach() + self.target_entropy
+        entropy_gap = log_prob.detach().float() + self.target_entropy
         temperature_loss = -torch.mean(self.log_temperature * entropy_gap)
         self._step([self.log_temperature], self.temperature_optim, temperature_loss)
-        return {
-            "actor_loss": actor_loss.item(),
-            "entropy": -log_prob.detach().mean().item(),
-            "temperature": self.temperature.item(),
-        }
+        entropy = -log_prob.detach().float().mean().item()
+        return {"entropy": entropy, "temperature": self.temperature.item()}
 
     def _training_state(self) -> dict[str, Any]:
         return {
@@ -151,10 +121,10 @@ class TQCLearner(SACLearner):
         return self.config.quantiles
 
     def _value(self, critic: nn.Module, inputs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
-        return critic(inputs, self._features(action)).mean(dim=(1, 2))
+        return self._critic_values(critic, inputs, action).mean(dim=(1, 2))
 
     def _next_atoms(self, critic: nn.Module, inputs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
-        atoms = critic(inputs, self._features(action)).flatten(1)
+        atoms = self._critic_values(critic, inputs, action).flatten(1)
         kept = atoms.shape[1] - self.config.dropped_quantiles * self.config.critics
         return torch.sort(atoms, dim=1).values[:, :kept]
 

@@ -69,6 +69,7 @@ PAPER_SETTINGS: dict[str, Any] = {
     "high.xavier_init": True,
     "high.actor_after_critic": False,
     "collect_ahead": False,
+    "precision": "float32",
     "segments": 2,
     "subgoal_sigma": 0.05,
     # Dot-to-Dot as the paper describes it: near goals for the low level, both levels

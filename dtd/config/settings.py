@@ -98,6 +98,19 @@ class Device(enum.Enum):
     """CUDA where torch finds a GPU, else the CPU."""
 
 
+class Precision(enum.Enum):
+    """The number format of the networks' passes in an update."""
+
+    auto = "auto"
+    """bfloat16 where the device computes it natively and its learning was shown equal to
+    float32's (``BFLOAT16_BY_DEFAULT``), else float32; a run records which it chose."""
+    float32 = "float32"
+    """Every pass in float32."""
+    bfloat16 = "bfloat16"
+    """Forward and backward passes in bfloat16 (autocast); parameters, Adam's state, the
+    normalisers, the target and the losses in float32; acting and evaluation in float32."""
+
+
 class Preset(enum.Enum):
     """The defaults every setting starts from; options given beside it override them."""
 
@@ -180,7 +193,7 @@ given. With 3, Dot-to-Dot's low level reached 0.9 eval success on FetchPush at 1
 120k env steps (seeds 0-2) against 175k, 160k and 145k with one-step returns
 (docs/tuning.md); ``her`` and ``ddpg`` keep one-step returns, as the reference."""
 
-SETTINGS_BEFORE_THEIR_KEY = {"n_step": 1, "explore_snapshots": 0}
+SETTINGS_BEFORE_THEIR_KEY = {"n_step": 1, "explore_snapshots": 0, "precision": "float32"}
 """Settings whose default changed after runs were written without them: a ``config.json``
 without the key was written when the run used this value."""
 
@@ -312,6 +325,10 @@ class TrainConfig:
     """Where the learners' networks, optimisers and batches live: cpu, cuda, or auto, cuda where
     torch finds a GPU; replay and the collecting process's acting stay on the CPU. A run's
     checkpoints load on either (--resume RUN --device cpu moves a GPU run to the CPU)."""
+    precision: Precision = Precision.auto
+    """Number format of the networks' passes in an update, at both levels: float32, bfloat16,
+    or auto (bfloat16 where the device computes it natively and it learned as float32 did, else
+    float32); a new run records the one chosen, and keeps it on resume unless given."""
     workers: int | None = None
     """Data-parallel workers (torch.distributed): each collects its own episodes into its own
     replay; every update's gradients are averaged over all and the input statistics summed.

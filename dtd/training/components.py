@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import os
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -25,6 +26,7 @@ from dtd.config import (
     Collection,
     Device,
     HighTarget,
+    Precision,
     TrainConfig,
     with_algorithm_defaults,
 )
@@ -40,6 +42,8 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
     config = with_algorithm_defaults(config)
     gamma = config.learner.gamma if config.learner.gamma is not None else spec.default_gamma()
     device = resolved_device(config.device)
+    # A run records the precision it chose; ``auto`` here is a configuration never planned as a run.
+    precision = UPDATE_DTYPES[resolved_precision(config.precision, device)]
     low = make_learner(
         spec.obs_dim,
         spec.goal_dim,
@@ -50,6 +54,7 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
         spec.sparse_rewards,
         collective,
         device,
+        precision,
     )
     buffer = EpisodeBuffer.for_transitions(
         config.buffer_size, spec.horizon, spec.obs_dim, spec.goal_dim, spec.action_dim
@@ -98,6 +103,7 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
         spec.sparse_rewards,
         collective,
         device,
+        precision,
     )
     return DotToDotAgent(
         low=low,
@@ -227,6 +233,41 @@ def resolved_device(device: Device) -> torch.device:
     if device is Device.cuda and not available:
         raise ConfigError("--device cuda: torch finds no CUDA GPU on this machine; use --device cpu or auto")
     return torch.device(device.value)
+
+
+BFLOAT16_BY_DEFAULT = False
+"""Whether ``--precision auto`` chooses bfloat16 where the device computes it natively: only once
+bfloat16 updates have learned as float32's did on the tuning seeds (docs/results/precision.md)."""
+
+UPDATE_DTYPES = {Precision.float32: torch.float32, Precision.bfloat16: torch.bfloat16}
+
+
+def resolved_precision(precision: Precision, device: torch.device) -> Precision:
+    """``auto`` made concrete for ``device``: bfloat16 where it is native there and
+    :data:`BFLOAT16_BY_DEFAULT`, else float32."""
+    if precision is not Precision.auto:
+        return precision
+    native = native_bfloat16(device)
+    return Precision.bfloat16 if native and BFLOAT16_BY_DEFAULT else Precision.float32
+
+
+def native_bfloat16(device: torch.device) -> bool:
+    """Whether ``device`` does bfloat16 matrix products in hardware: a CUDA GPU that supports
+    them, a CPU with AVX-512 BF16 or AMX (where it lists its features, as Linux does)."""
+    if device.type == "cuda":
+        return torch.cuda.is_bf16_supported()
+    return bool({"avx512_bf16", "amx_bf16"} & cpu_features())
+
+
+@functools.cache
+def cpu_features() -> frozenset[str]:
+    """The CPU's feature flags as /proc/cpuinfo lists them (none where there is no such file)."""
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return frozenset()
+    flags = next((line for line in text.splitlines() if line.startswith("flags")), "")
+    return frozenset(flags.partition(":")[2].split())
 
 
 def resolved_collection(collection: Collection, threads: int, local_workers: int = 1) -> Collection:

@@ -18,7 +18,15 @@ from dtd.envs.spec import EnvSpec
 from dtd.errors import CheckpointError, ConfigError, RunDirError, WorkerLost
 from dtd.training.atomic import remove_stale_temporaries
 from dtd.training.checkpoint import Checkpoint, TrainState, restoring
-from dtd.training.components import Components, build, make_task_envs, resolved_threads
+from dtd.training.collector import ProcessCollector
+from dtd.training.components import (
+    Components,
+    build,
+    make_task_envs,
+    resolved_device,
+    resolved_precision,
+    resolved_threads,
+)
 from dtd.training.launch import ALONE_HERE, JobPlace
 from dtd.training.progress import TrainingProgress
 from dtd.training.recorder import MetricsRecorder
@@ -28,7 +36,7 @@ from dtd.training.trainer import Trainer, restore
 from dtd.training.workers import SOLO, WorkerGroup, join_group, leave_group
 
 # Settings that may change when a run is resumed; any other must stay as the run began.
-RESUMABLE_SETTINGS = frozenset({"epochs", "threads", "collector", "explore_snapshots", "device"})
+RESUMABLE_SETTINGS = frozenset({"epochs", "threads", "collector", "explore_snapshots", "device", "precision"})
 _RESUMABLE_FLAGS = ", ".join("--" + name.replace("_", "-") for name in sorted(RESUMABLE_SETTINGS))
 DOT_TO_DOT_SETTINGS = frozenset(DOT_TO_DOT_FIELDS)
 """Dot-to-Dot's settings (the high level's as ``high.<name>``), which only ``--algo dtd`` uses."""
@@ -140,7 +148,7 @@ def plan_start(
             raise ConfigError("give the run directory once: --resume DIR (without --run-dir)")
         run = RunDir(Path(resume))
         # A missing or unreadable run is refused here.
-        resumed = resumed_config(read_config(run), config, given)
+        resumed = _chosen_precision(resumed_config(read_config(run), config, given))
         resumed.validate()
         return StartPlan(resumed, run, resuming=True)
     config.validate()
@@ -150,10 +158,12 @@ def plan_start(
             f"{', '.join(unused)}: Dot-to-Dot's settings, which --algo {config.algo.value} does not use; "
             "leave them out or train --algo dtd"
         )
-    # The thread count is part of what makes a run repeatable: the run records it. Under
-    # torchrun the workers are the job's size.
+    # The thread count and precision are part of what makes a run repeatable: the run records
+    # them. Under torchrun the workers are the job's size.
     config = dataclasses.replace(
-        config, threads=resolved_threads(config.threads), workers=config.workers or place.workers or 1
+        _chosen_precision(config),
+        threads=resolved_threads(config.threads),
+        workers=config.workers or place.workers or 1,
     )
     run = RunDir(Path(run_dir) if run_dir is not None else default_run_dir(config))
     if run.holds_run() and not force:
@@ -161,6 +171,14 @@ def plan_start(
             f"{run.root} already holds a run; continue it with --resume {run.root} or replace it with --force"
         )
     return StartPlan(config, run, resuming=False, force=force)
+
+
+def _chosen_precision(config: TrainConfig) -> TrainConfig:
+    """``config`` with the precision ``auto`` chooses on this machine made concrete: a run keeps
+    the number format it began with wherever it resumes."""
+    return dataclasses.replace(
+        config, precision=resolved_precision(config.precision, resolved_device(config.device))
+    )
 
 
 def train(
@@ -290,11 +308,19 @@ def _train_started(
             if recorder is not None:
                 recorder.write_csv(state.history)
             progress.start_at(state.env_steps)
+            progress.note(
+                f"updates in {config.precision.value} on {resolved_device(config.device)}, "
+                f"{resolved_threads(config.threads)} torch thread(s), collecting {_collecting(components)}"
+            )
             return trainer.train(state)
     finally:
         if recorder is not None:
             recorder.close()
         components.close()
+
+
+def _collecting(components: Components) -> str:
+    return "in a process" if isinstance(components.collector, ProcessCollector) else "inline"
 
 
 def train_to_end(config: TrainConfig, run_dir: Path | str) -> TrainState:

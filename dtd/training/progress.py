@@ -35,6 +35,10 @@ class TrainingProgress:
     def __exit__(self, *exc: object) -> None:
         self.progress.stop()
 
+    def note(self, text: str) -> None:
+        """One line about the run, printed as an epoch's are."""
+        self.console.print(text, soft_wrap=True)
+
     def start_at(self, steps: int) -> None:
         """Show ``steps`` env steps as already done (a resumed run)."""
         self.progress.update(self.task, completed=steps)

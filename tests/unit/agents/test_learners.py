@@ -75,7 +75,7 @@ def test_td3_target_is_the_lower_twin_of_the_smoothed_target_action():
         next_action = 2.0 * learner.actor_target(step.next_inputs)
         values = member_values(learner.critic_target, step.next_inputs, next_action / 2.0)[..., 0]
         by_hand = step.reward + GAMMA * torch.minimum(values[:, 0], values[:, 1])
-    torch.testing.assert_close(learner.target(step), torch.clamp(by_hand, -1 / (1 - GAMMA), 0.0))
+    torch.testing.assert_close(learner.target(step)[:, 0], torch.clamp(by_hand, -1 / (1 - GAMMA), 0.0))
 
 
 def test_td3_target_noise_is_clipped_and_the_action_kept_in_bounds():
@@ -114,7 +114,7 @@ def test_tqc_target_pools_every_critics_atoms_and_drops_the_highest():
     learner = learner_of(LearnerKind.tqc, critics=2, quantiles=3, dropped_quantiles=1)
     assert isinstance(learner, TQCLearner)
     atoms = torch.tensor([[[5.0, -1.0, 2.0], [0.5, 9.0, -3.0]], [[1.0, 1.0, 1.0], [0.0, -2.0, 4.0]]])
-    learner._train_nets["critic_target"] = lambda inputs, features: atoms
+    learner.critic_target = lambda inputs, features: atoms
     log_prob = torch.tensor([0.5, -1.0])
     learner._sample = lambda inputs: (torch.zeros(2, ACT), log_prob)
     batch = Batch(
@@ -137,7 +137,7 @@ def test_sac_target_is_the_lower_twin_less_the_entropy_term_and_a_given_action_h
     learner = learner_of(LearnerKind.sac, critics=2)
     assert isinstance(learner, SACLearner)
     values = torch.tensor([[[-2.0], [-3.0]], [[-1.0], [-0.5]]])
-    learner._train_nets["critic_target"] = lambda inputs, features: values
+    learner.critic_target = lambda inputs, features: values
     learner._sample = lambda inputs: (torch.zeros(2, ACT), torch.tensor([2.0, 2.0]))
     batch = Batch(
         obs=np.zeros((2, OBS), np.float32),

@@ -16,12 +16,12 @@ from dtd.cli.options import (
     settings_given,
     settings_registry,
 )
-from dtd.config import Algo, Collection, LearnerKind, Preset, TrainConfig, preset_config
+from dtd.config import Algo, Collection, Device, LearnerKind, Precision, Preset, TrainConfig, preset_config
 from dtd.envs.spec import EnvSpec
 from dtd.errors import CheckpointError, ConfigError
 from dtd.training import components
 from dtd.training.checkpoint import FORMAT_VERSION, Checkpoint, TrainState, load_checkpoint, save_atomic
-from dtd.training.lifecycle import resumed_config
+from dtd.training.lifecycle import plan_start, resumed_config
 
 VALID = TrainConfig(env="FetchReach-v4")
 VALID_PATH = Path("run/checkpoints/latest.pt")
@@ -215,3 +215,37 @@ def parsed_settings(args: list[str]) -> TrainConfig:
 def _settings_of(config: Annotated[TrainConfig, tyro.conf.arg(name="")]) -> TrainConfig:
     """The settings parsed."""
     return config
+
+
+def test_auto_precision_is_bfloat16_only_where_native_and_chosen(monkeypatch):
+    cpu = torch.device("cpu")
+    for precision in (Precision.float32, Precision.bfloat16):
+        assert components.resolved_precision(precision, cpu) is precision
+    monkeypatch.setattr(components, "cpu_features", lambda: frozenset({"avx512f", "avx512_bf16"}))
+    monkeypatch.setattr(components, "BFLOAT16_BY_DEFAULT", True)
+    assert components.resolved_precision(Precision.auto, cpu) is Precision.bfloat16
+    monkeypatch.setattr(components, "cpu_features", lambda: frozenset({"avx512f", "amx_bf16"}))
+    assert components.resolved_precision(Precision.auto, cpu) is Precision.bfloat16
+    monkeypatch.setattr(components, "cpu_features", lambda: frozenset({"avx2"}))
+    assert components.resolved_precision(Precision.auto, cpu) is Precision.float32
+    monkeypatch.setattr(components, "cpu_features", lambda: frozenset({"avx512_bf16"}))
+    monkeypatch.setattr(components, "BFLOAT16_BY_DEFAULT", False)
+    assert components.resolved_precision(Precision.auto, cpu) is Precision.float32
+
+
+def test_a_run_records_the_precision_chosen_and_keeps_it_on_resume(monkeypatch, tmp_path):
+    monkeypatch.setattr(components, "BFLOAT16_BY_DEFAULT", True)
+    monkeypatch.setattr(components, "cpu_features", lambda: frozenset({"avx512_bf16"}))
+    plan = plan_start(dataclasses.replace(VALID, device=Device.cpu), tmp_path / "run")
+    assert plan.config.precision is Precision.bfloat16
+    assert preset_config(Preset.paper).precision is Precision.float32
+    # A config.json written before the setting was bfloat16's.
+    data = VALID.to_dict()
+    del data["precision"]
+    assert TrainConfig.from_dict(data).precision is Precision.float32
+    # On resume the run's own is kept, and may be changed.
+    stored = dataclasses.replace(VALID, precision=Precision.bfloat16)
+    assert resumed_config(stored, TrainConfig(epochs=80)).precision is Precision.bfloat16
+    args = ["--precision", "float32"]
+    changed = resumed_config(stored, parsed_settings(args), settings_given(args))
+    assert changed == dataclasses.replace(stored, precision=Precision.float32)
