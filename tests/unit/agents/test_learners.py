@@ -125,11 +125,11 @@ def test_tqc_target_pools_every_critics_atoms_and_drops_the_highest():
         next_obs=np.zeros((2, OBS), np.float32),
     )
     alpha = learner.temperature.item()
-    # Pooled and sorted: row 0 [-3, -1, 0.5, 2, 5, 9], row 1 [-2, 0, 1, 1, 1, 4]; the top 2 of 6
-    # dropped (one per critic).
+    # Pooled: row 0 [-3, -1, 0.5, 2, 5, 9], row 1 [-2, 0, 1, 1, 1, 4]; the top 2 of 6 dropped
+    # (one per critic); the kept atoms are a set, in no order.
     kept = torch.tensor([[-3.0, -1.0, 0.5, 2.0], [-2.0, 0.0, 1.0, 1.0]])
     by_hand = torch.tensor([[-1.0], [0.0]]) + GAMMA * (kept - alpha * log_prob[:, None])
-    target = learner.target(learner.step_tensors(batch))
+    target = torch.sort(learner.target(learner.step_tensors(batch)), dim=1).values
     torch.testing.assert_close(target, torch.clamp(by_hand, -1 / (1 - GAMMA), 0.0))
 
 
@@ -160,6 +160,32 @@ def test_quantile_huber_loss_by_hand():
     target = torch.tensor([[0.5, 3.0]])
     by_hand = (0.25 * 0.125 + 0.25 * 2.5 + 0.25 * 0.125 + 0.75 * 1.5) / 4
     assert quantile_huber_loss(quantiles, target).item() == pytest.approx(by_hand)
+
+
+def pairwise_quantile_huber(quantiles: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """The loss as its definition reads: every quantile against every target atom."""
+    count = quantiles.shape[-1]
+    levels = (torch.arange(count, dtype=quantiles.dtype) + 0.5) / count
+    delta = target[:, None, None, :] - quantiles[..., None]
+    weight = torch.abs(levels[:, None] - (delta < 0).float())
+    huber = torch.where(delta.abs() <= 1.0, 0.5 * delta.square(), delta.abs() - 0.5)
+    return torch.mean(weight * huber)
+
+
+@pytest.mark.parametrize(("scale", "shift"), [(0.3, 0.0), (2.0, -15.0), (10.0, -30.0)])
+def test_the_quantile_huber_loss_and_its_gradient_are_the_pairwise_ones(scale, shift):
+    generator = torch.Generator().manual_seed(0)
+    quantiles = (torch.randn(64, 2, 25, generator=generator) * scale + shift).requires_grad_()
+    target = torch.randn(64, 46, generator=generator) * scale + shift  # in no order
+    target[:3, 10] = quantiles[:3, 0, 0].detach()  # ties
+    target[:3, 11] = quantiles[:3, 0, 1].detach() + 1.0  # at the Huber's kink
+    target[5] = target[5, :1]  # one value throughout (a known next value)
+    ours = quantile_huber_loss(quantiles, target)
+    (ours_grad,) = torch.autograd.grad(ours, quantiles)
+    theirs = pairwise_quantile_huber(quantiles, target)
+    (theirs_grad,) = torch.autograd.grad(theirs, quantiles)
+    torch.testing.assert_close(ours, theirs, rtol=1e-5, atol=1e-7)
+    torch.testing.assert_close(ours_grad, theirs_grad, rtol=1e-4, atol=1e-9)
 
 
 def test_quantiles_learn_the_quantiles_of_their_targets():
