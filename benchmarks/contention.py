@@ -8,6 +8,7 @@ rows set the environment by hand and import torch first.
 
     python benchmarks/contention.py                      # updates, quiet and beside 1 busy core
     python benchmarks/contention.py --busy 0 1 2 --train # ... and a 5-cycle FetchPush epoch
+    python benchmarks/contention.py --precision bfloat16 --train
 """
 
 from __future__ import annotations
@@ -34,7 +35,9 @@ SETTINGS = {
 SPIN = "while True: pass"
 
 
-def time_updates(threads: int, batch: int, updates: int, through_dtd: bool) -> dict[str, float]:
+def time_updates(
+    threads: int, batch: int, updates: int, through_dtd: bool, precision: str = "float32"
+) -> dict[str, float]:
     """In this process: ms per update (median over blocks of 10) of a fresh learner."""
     if through_dtd:
         import dtd  # noqa: F401  (imported before torch, as the command line does)
@@ -50,9 +53,9 @@ def time_updates(threads: int, batch: int, updates: int, through_dtd: bool) -> d
     from updates import ACT, GOAL, OBS, random_batch  # benchmarks/updates.py: FetchPush's sizes
 
     rng = np.random.default_rng(0)
-    learner = DDPGLearner(
-        OBS, GOAL, ACT, BoxActionHead(1.0), LearnerConfig(batch_size=batch), 0.98, (-1.0, 0.0)
-    )
+    config = LearnerConfig(batch_size=batch)
+    dtype = getattr(torch, precision)
+    learner = DDPGLearner(OBS, GOAL, ACT, BoxActionHead(1.0), config, 0.98, (-1.0, 0.0), precision=dtype)
     batches = [random_batch(rng, batch) for _ in range(20)]
     for b in batches[:10]:
         learner.update(b)
@@ -75,21 +78,21 @@ def child_environment(overrides: dict[str, str | None]) -> dict[str, str]:
     return env
 
 
-def run_child(name: str, batch: int, updates: int, repeats: int) -> dict[str, float]:
+def run_child(name: str, batch: int, updates: int, repeats: int, precision: str) -> dict[str, float]:
     """The median over ``repeats`` fresh processes of :func:`one_child`."""
     import statistics
 
-    runs = [one_child(name, batch, updates) for _ in range(repeats)]
+    runs = [one_child(name, batch, updates, precision) for _ in range(repeats)]
     return {"ms": statistics.median(run["ms"] for run in runs), "threads": runs[0]["threads"]}
 
 
-def one_child(name: str, batch: int, updates: int) -> dict[str, float]:
+def one_child(name: str, batch: int, updates: int, precision: str) -> dict[str, float]:
     threads, overrides = SETTINGS[name]
     command = [
         sys.executable,
         __file__,
         "--child",
-        json.dumps([threads, batch, updates, name.startswith("dtd")]),
+        json.dumps([threads, batch, updates, name.startswith("dtd"), precision]),
     ]
     done = subprocess.run(
         command, capture_output=True, text=True, env=child_environment(overrides), check=True
@@ -97,13 +100,13 @@ def one_child(name: str, batch: int, updates: int) -> dict[str, float]:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def run_epoch(name: str, workdir: str) -> float:
+def run_epoch(name: str, workdir: str, precision: str) -> float:
     """Seconds of `dtd train` for one 5-cycle FetchPush dtd epoch with this setting."""
     threads, overrides = SETTINGS[name]
     run_dir = os.path.join(workdir, f"epoch-{time.monotonic_ns()}")
     command = [sys.executable, "-m", "dtd", "train", "--env", "FetchPush-v4", "--algo", "dtd",
                "--epochs", "1", "--n-cycles", "5", "--threads", str(max(threads, 0)),
-               "--no-progress", "--run-dir", run_dir]  # fmt: skip
+               "--precision", precision, "--no-progress", "--run-dir", run_dir]  # fmt: skip
     env = child_environment(overrides)
     done = subprocess.run(command, capture_output=True, text=True, env=env, check=True)
     return float(json.loads(done.stdout.strip().splitlines()[-1])["wall_s"])
@@ -121,17 +124,18 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="fresh processes per setting (median)")
     parser.add_argument("--only", nargs="+", choices=sorted(SETTINGS), help="these settings only")
     parser.add_argument("--train", action="store_true", help="also time a 5-cycle FetchPush dtd epoch")
+    parser.add_argument("--precision", choices=["float32", "bfloat16"], default="float32")
     parser.add_argument("--child", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
-        threads, batch, updates, through_dtd = json.loads(args.child)
-        print(json.dumps(time_updates(threads, batch, updates, through_dtd)))
+        print(json.dumps(time_updates(*json.loads(args.child))))
         return
 
     import tempfile
 
+    omp = os.environ.get("OMP_NUM_THREADS", "unset")
     print(f"# {platform.machine()}, {os.cpu_count()} cores, batch {args.batch}, {args.updates} updates "
-          f"per setting; OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')}")  # fmt: skip
+          f"per setting, {args.precision}; OMP_NUM_THREADS={omp}")  # fmt: skip
     names = [name for name in SETTINGS if not args.only or name in args.only or name == "1 thread"]
     results: dict[tuple[str, int], dict[str, float]] = {}
     with tempfile.TemporaryDirectory() as workdir:
@@ -140,9 +144,9 @@ def main() -> None:
             try:
                 time.sleep(0.5)
                 for name in names:
-                    figures = run_child(name, args.batch, args.updates, args.repeats)
+                    figures = run_child(name, args.batch, args.updates, args.repeats, args.precision)
                     if args.train:
-                        figures["epoch_s"] = run_epoch(name, workdir)
+                        figures["epoch_s"] = run_epoch(name, workdir, args.precision)
                     results[name, busy] = figures
                     extra = f", epoch {figures['epoch_s']:.1f} s" if args.train else ""
                     print(f"busy {busy}  {name:<38} {figures['ms']:8.2f} ms/update "
