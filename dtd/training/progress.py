@@ -13,6 +13,7 @@ class TrainingProgress:
 
     def __init__(self, total_steps: int, epochs: int, enabled: bool = True) -> None:
         self.epochs = epochs
+        self.pending_note = ""
         self.console = Console(stderr=True)
         self.progress = Progress(
             TextColumn("[bold]epoch {task.fields[epoch]}/{task.fields[epochs]}"),
@@ -36,8 +37,9 @@ class TrainingProgress:
         self.progress.stop()
 
     def note(self, text: str) -> None:
-        """One line about the run, printed as an epoch's are."""
-        self.console.print(text, soft_wrap=True)
+        """A word about the run, shown at the end of the first epoch's line (a start that fails
+        before its first epoch ends in its error line alone)."""
+        self.pending_note = text
 
     def start_at(self, steps: int) -> None:
         """Show ``steps`` env steps as already done (a resumed run)."""
@@ -53,9 +55,11 @@ class TrainingProgress:
         steps, epoch = int(row["env_steps"]), int(row["epoch"])
         total = round(steps * self.epochs / epoch) if epoch > 0 else None
         self.progress.update(self.task, eval=f"{row['eval_success']:.2f}", completed=steps, total=total)
+        note = f"  ({self.pending_note})" if self.pending_note else ""
+        self.pending_note = ""
         self.console.print(
             f"epoch {int(row['epoch'])}/{self.epochs}  steps {int(row['env_steps']):,}  "
             f"eval success {row['eval_success']:.3f}  train success {row['train_success']:.3f}  "
-            f"final dist {row['eval_final_distance']:.3f}  wall {row['wall_s']:.0f}s",
+            f"final dist {row['eval_final_distance']:.3f}  wall {row['wall_s']:.0f}s{note}",
             soft_wrap=True,
         )
