@@ -1,0 +1,65 @@
+"""A markdown table of finished runs side by side, one row per run: env steps (and wall) at which
+its 3-epoch mean eval success first met 0.5 and 0.9, its mean eval success over a window of
+env steps, the mean of its last five evaluations, its budget and wall time.
+
+    python benchmarks/curve_table.py --up-to 150000 --window 50000 150000 \\
+        "s0 float32=runs/push-f32-s0" "s0 bfloat16=runs/push-bf16-s0"
+
+A run is given as LABEL=RUN_DIR (a folder with config.json and metrics.csv); the curve is cut at
+--up-to env steps. The window's mean counts each evaluation in (start, end], so it weighs how soon
+a run learns as well as where it ends, with less of the noise of one epoch's 10 test episodes.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from dtd.experiments.curves import Curve, read_curve
+
+LEVELS = (0.5, 0.9)
+
+
+def reached(curve: Curve, level: float) -> str:
+    first = curve.first_reaching(level)
+    return "-" if first is None else f"{first[0] // 1000}k"
+
+
+def window_mean(curve: Curve, start: float, end: float) -> float:
+    inside = (curve.env_steps > start) & (curve.env_steps <= end)
+    return float(curve.eval_success[inside].mean()) if inside.any() else float("nan")
+
+
+def row(label: str, curve: Curve, start: float, end: float) -> str:
+    last = curve.eval_success[-5:].mean() if len(curve) else float("nan")
+    steps = f"{int(curve.env_steps[-1]) // 1000}k" if len(curve) else "-"
+    wall = f"{curve.wall_s[-1] / 60:.0f} min" if len(curve) else "-"
+    cells = [label, *(reached(curve, level) for level in LEVELS)]
+    cells += [f"{window_mean(curve, start, end):.2f}", f"{last:.2f}", steps, wall]
+    return "| " + " | ".join(cells) + " |"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("runs", nargs="+", metavar="LABEL=RUN_DIR")
+    parser.add_argument("--up-to", type=float, default=np.inf, help="cut each curve at these env steps")
+    parser.add_argument("--window", type=float, nargs=2, metavar=("START", "END"), default=(0.0, np.inf))
+    args = parser.parse_args()
+    start, end = args.window
+    window = f"mean {start / 1000:.0f}k-{min(end, args.up_to) / 1000:.0f}k"
+    levels = " | ".join(f"to {level}" for level in LEVELS)
+    print(f"| run | {levels} | {window} | last 5 | steps | wall |")
+    print("|---" * (len(LEVELS) + 5) + "|")
+    for given in args.runs:
+        label, separator, run_dir = given.partition("=")
+        if not separator:
+            parser.error(f"{given!r} is not LABEL=RUN_DIR")
+        print(row(label, read_curve(Path(run_dir)).up_to(args.up_to), start, end))
+
+
+if __name__ == "__main__":
+    main()
