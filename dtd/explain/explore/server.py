@@ -295,6 +295,20 @@ def url_of(sock: socket.socket) -> str:
     return f"http://{shown}:{port}/"
 
 
+class AnnouncingServer(uvicorn.Server):
+    """A uvicorn server that says it is ready once it serves: by then it has taken over SIGINT
+    and SIGTERM, so a stop at any moment after the announcement shuts it down cleanly."""
+
+    def __init__(self, config: uvicorn.Config, announce: Callable[[], None]) -> None:
+        super().__init__(config)
+        self.announce = announce
+
+    async def startup(self, sockets: list[socket.socket] | None = None) -> None:
+        await super().startup(sockets=sockets)
+        if self.started:
+            self.announce()
+
+
 def serve(run_dir: Path, host: str, port: int, videos: Path, ready: Callable[[str], None]) -> None:
     """Serve the explorer of ``run_dir`` until interrupted (Ctrl-C stops it cleanly);
     ``ready`` is told the page's URL once the server listens."""
@@ -308,9 +322,8 @@ def serve(run_dir: Path, host: str, port: int, videos: Path, ready: Callable[[st
         if len(explorers) < len(starting):  # one could not start: the others are closed below
             raise next(started.exception() for started in starting if started.exception() is not None)
         app = create_app(*explorers, episode_worker, map_worker, allowed_hosts(host))
-        server = uvicorn.Server(uvicorn.Config(app, log_level="warning", access_log=False))
-        ready(url_of(sock))
-        server.run(sockets=[sock])
+        config = uvicorn.Config(app, log_level="warning", access_log=False)
+        AnnouncingServer(config, lambda: ready(url_of(sock))).run(sockets=[sock])
     finally:
         for worker, started in zip((episode_worker, map_worker), starting, strict=True):
             if started.exception() is None:
