@@ -102,8 +102,9 @@ class Precision(enum.Enum):
     """The number format of the networks' passes in an update."""
 
     auto = "auto"
-    """bfloat16 where the device computes it natively and its learning was shown equal to
-    float32's (``BFLOAT16_BY_DEFAULT``), else float32; a run records which it chose."""
+    """bfloat16 where the device computes it natively and the algorithm's learning was shown equal
+    to float32's (``dtd`` with DDPG at both levels: ``BFLOAT16_SHOWN_EQUAL``), else float32; a
+    run records which it chose."""
     float32 = "float32"
     """Every pass in float32."""
     bfloat16 = "bfloat16"

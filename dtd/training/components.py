@@ -26,6 +26,7 @@ from dtd.config import (
     Collection,
     Device,
     HighTarget,
+    LearnerKind,
     Precision,
     TrainConfig,
     with_algorithm_defaults,
@@ -43,7 +44,7 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
     gamma = config.learner.gamma if config.learner.gamma is not None else spec.default_gamma()
     device = resolved_device(config.device)
     # A run records the precision it chose; ``auto`` here is a configuration never planned as a run.
-    precision = UPDATE_DTYPES[resolved_precision(config.precision, device)]
+    precision = UPDATE_DTYPES[resolved_precision(config, device)]
     low = make_learner(
         spec.obs_dim,
         spec.goal_dim,
@@ -235,20 +236,27 @@ def resolved_device(device: Device) -> torch.device:
     return torch.device(device.value)
 
 
-BFLOAT16_BY_DEFAULT = False
-"""Whether ``--precision auto`` chooses bfloat16 where the device computes it natively: only once
-bfloat16 updates have learned as float32's did on the tuning seeds (docs/results/precision.md)."""
+BFLOAT16_SHOWN_EQUAL = frozenset({Algo.dtd})
+"""The algorithms whose bfloat16 updates learned as their float32 updates did on the tuning seeds,
+with DDPG at every level: where ``--precision auto`` chooses bfloat16 on a device that computes it
+natively. Dot-to-Dot on FetchPush (median 3-epoch 0.9 at 120k both) and FetchPickAndPlace (0.5 at
+225-240k both); not ``her``, whose FetchPush success over 100k-200k was 0.14 against float32's
+0.28 (seeds 0-2), nor the learners not compared (docs/results/precision.md)."""
 
 UPDATE_DTYPES = {Precision.float32: torch.float32, Precision.bfloat16: torch.bfloat16}
 
 
-def resolved_precision(precision: Precision, device: torch.device) -> Precision:
-    """``auto`` made concrete for ``device``: bfloat16 where it is native there and
-    :data:`BFLOAT16_BY_DEFAULT`, else float32."""
-    if precision is not Precision.auto:
-        return precision
-    native = native_bfloat16(device)
-    return Precision.bfloat16 if native and BFLOAT16_BY_DEFAULT else Precision.float32
+def resolved_precision(config: TrainConfig, device: torch.device) -> Precision:
+    """``config.precision`` made concrete for ``device``: ``auto`` is bfloat16 where it is native
+    there and the algorithm, with DDPG at every level, is one of :data:`BFLOAT16_SHOWN_EQUAL`;
+    else float32."""
+    if config.precision is not Precision.auto:
+        return config.precision
+    learners = {config.learner.learner}
+    if config.algo is Algo.dtd:
+        learners.add(config.dtd.high.learner)
+    shown_equal = config.algo in BFLOAT16_SHOWN_EQUAL and learners == {LearnerKind.ddpg}
+    return Precision.bfloat16 if shown_equal and native_bfloat16(device) else Precision.float32
 
 
 def native_bfloat16(device: torch.device) -> bool:

@@ -176,9 +176,7 @@ def plan_start(
 def _chosen_precision(config: TrainConfig) -> TrainConfig:
     """``config`` with the precision ``auto`` chooses on this machine made concrete: a run keeps
     the number format it began with wherever it resumes."""
-    return dataclasses.replace(
-        config, precision=resolved_precision(config.precision, resolved_device(config.device))
-    )
+    return dataclasses.replace(config, precision=resolved_precision(config, resolved_device(config.device)))
 
 
 def train(

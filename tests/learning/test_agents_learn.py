@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dtd.agents.segments import subgoal_placement
-from dtd.config import Algo, Collection, DotToDotConfig, LearnerConfig, TrainConfig
+from dtd.config import Algo, Collection, DotToDotConfig, LearnerConfig, Precision, TrainConfig
 from dtd.training.lifecycle import train
 from dtd.training.trained_run import evaluate_run, load_agent
 from tests.helpers import dtd
@@ -44,6 +44,9 @@ def test_dtd_high_level_leads_toward_a_goal_beyond_one_segments_reach(tmp_path):
     # so an episode succeeds only if the first sub-goal leads toward the goal; a high level that
     # learned nothing (or the wrong thing: with its reward negated, success 0.1-0.25 and progress
     # about 0) fails here, while FetchReach above is solved by the last segment alone.
+    # Float32: the grid check below is seed-noisy at either precision (median best progress on
+    # seeds 0-5 float32 0.35-0.79, bfloat16 0.07-0.75, its seed 0 the low one), and this test is
+    # about the high level, not the number format (bfloat16's learning: docs/results/precision.md).
     learner = LearnerConfig(hidden_sizes=(64, 64), batch_size=128, action_l2=0.05)
     config = TrainConfig(
         env="tests.goal_envs:PointGoalFar-v0",
@@ -56,6 +59,7 @@ def test_dtd_high_level_leads_toward_a_goal_beyond_one_segments_reach(tmp_path):
         test_episodes=20,
         threads=1,
         collector=Collection.inline,
+        precision=Precision.float32,
         learner=learner,
         dtd=DotToDotConfig(
             subgoal_max_distance=0.5,
@@ -133,6 +137,7 @@ def test_agents_learn_a_task_that_ends_on_reaching_the_goal(tmp_path, algo):
         test_episodes=20,
         threads=1,
         collector=Collection.inline,
+        precision=Precision.float32,
         learner=learner,
         dtd=DotToDotConfig(
             subgoal_max_distance=0.5,

@@ -16,7 +16,17 @@ from dtd.cli.options import (
     settings_given,
     settings_registry,
 )
-from dtd.config import Algo, Collection, Device, LearnerKind, Precision, Preset, TrainConfig, preset_config
+from dtd.config import (
+    Algo,
+    Collection,
+    Device,
+    LearnerKind,
+    Precision,
+    Preset,
+    TrainConfig,
+    preset_config,
+    with_settings,
+)
 from dtd.envs.spec import EnvSpec
 from dtd.errors import CheckpointError, ConfigError
 from dtd.training import components
@@ -217,29 +227,32 @@ def _settings_of(config: Annotated[TrainConfig, tyro.conf.arg(name="")]) -> Trai
     return config
 
 
-def test_auto_precision_is_bfloat16_only_where_native_and_chosen(monkeypatch):
+def test_auto_precision_is_bfloat16_only_where_native_and_shown_equal(monkeypatch):
     cpu = torch.device("cpu")
+    dtd = dataclasses.replace(VALID, algo=Algo.dtd)
     for precision in (Precision.float32, Precision.bfloat16):
-        assert components.resolved_precision(precision, cpu) is precision
+        assert components.resolved_precision(dataclasses.replace(dtd, precision=precision), cpu) is precision
     monkeypatch.setattr(components, "cpu_features", lambda: frozenset({"avx512f", "avx512_bf16"}))
-    monkeypatch.setattr(components, "BFLOAT16_BY_DEFAULT", True)
-    assert components.resolved_precision(Precision.auto, cpu) is Precision.bfloat16
+    assert components.resolved_precision(dtd, cpu) is Precision.bfloat16
     monkeypatch.setattr(components, "cpu_features", lambda: frozenset({"avx512f", "amx_bf16"}))
-    assert components.resolved_precision(Precision.auto, cpu) is Precision.bfloat16
+    assert components.resolved_precision(dtd, cpu) is Precision.bfloat16
+    # Learning not shown equal: HER, another learner at either level.
+    for other in (
+        dataclasses.replace(dtd, algo=Algo.her),
+        with_settings(dtd, ["learner=tqc"]),
+        with_settings(dtd, ["high.learner=td3"]),
+    ):
+        assert components.resolved_precision(other, cpu) is Precision.float32
     monkeypatch.setattr(components, "cpu_features", lambda: frozenset({"avx2"}))
-    assert components.resolved_precision(Precision.auto, cpu) is Precision.float32
-    monkeypatch.setattr(components, "cpu_features", lambda: frozenset({"avx512_bf16"}))
-    monkeypatch.setattr(components, "BFLOAT16_BY_DEFAULT", False)
-    assert components.resolved_precision(Precision.auto, cpu) is Precision.float32
+    assert components.resolved_precision(dtd, cpu) is Precision.float32
 
 
 def test_a_run_records_the_precision_chosen_and_keeps_it_on_resume(monkeypatch, tmp_path):
-    monkeypatch.setattr(components, "BFLOAT16_BY_DEFAULT", True)
     monkeypatch.setattr(components, "cpu_features", lambda: frozenset({"avx512_bf16"}))
-    plan = plan_start(dataclasses.replace(VALID, device=Device.cpu), tmp_path / "run")
+    plan = plan_start(dataclasses.replace(VALID, algo=Algo.dtd, device=Device.cpu), tmp_path / "run")
     assert plan.config.precision is Precision.bfloat16
     assert preset_config(Preset.paper).precision is Precision.float32
-    # A config.json written before the setting was bfloat16's.
+    # A config.json written before the setting existed was float32's.
     data = VALID.to_dict()
     del data["precision"]
     assert TrainConfig.from_dict(data).precision is Precision.float32
