@@ -5,14 +5,17 @@ env steps, the mean of its last five evaluations, its budget and wall time.
     python benchmarks/curve_table.py --up-to 150000 --window 50000 150000 \\
         "s0 float32=runs/push-f32-s0" "s0 bfloat16=runs/push-bf16-s0"
 
-A run is given as LABEL=RUN_DIR (a folder with config.json and metrics.csv); the curve is cut at
---up-to env steps. The window's mean counts each evaluation in (start, end], so it weighs how soon
-a run learns as well as where it ends, with less of the noise of one epoch's 10 test episodes.
+A run is given as LABEL=RUN_DIR (a folder with config.json and metrics.csv), or as LABEL=FILE.csv
+for a curve that ``peer_sb3.py`` wrote (env_steps, eval_success, wall_s: one row per evaluation,
+each counted as an epoch); the curve is cut at --up-to env steps. The window's mean counts each
+evaluation in (start, end], so it weighs how soon a run learns as well as where it ends, with less
+of the noise of one epoch's 10 test episodes.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +23,17 @@ import numpy as np
 from dtd.experiments.curves import Curve, read_curve
 
 LEVELS = (0.5, 0.9)
+
+
+def read_peer_curve(path: Path) -> Curve:
+    """A curve ``peer_sb3.py`` wrote, its evaluations numbered as epochs."""
+    with open(path, newline="") as file:
+        rows = [
+            [float(row[name]) for name in ("env_steps", "wall_s", "eval_success")]
+            for row in csv.DictReader(file)
+        ]
+    table = np.array(rows, dtype=float).reshape(-1, 3)
+    return Curve(np.arange(1, len(table) + 1, dtype=float), table[:, 0], table[:, 1], table[:, 2])
 
 
 def reached(curve: Curve, level: float) -> str:
@@ -45,7 +59,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("runs", nargs="+", metavar="LABEL=RUN_DIR")
+    parser.add_argument("runs", nargs="+", metavar="LABEL=RUN_DIR|FILE.csv")
     parser.add_argument("--up-to", type=float, default=np.inf, help="cut each curve at these env steps")
     parser.add_argument("--window", type=float, nargs=2, metavar=("START", "END"), default=(0.0, np.inf))
     args = parser.parse_args()
@@ -55,10 +69,12 @@ def main() -> None:
     print(f"| run | {levels} | {window} | last 5 | steps | wall |")
     print("|---" * (len(LEVELS) + 5) + "|")
     for given in args.runs:
-        label, separator, run_dir = given.partition("=")
+        label, separator, where = given.partition("=")
         if not separator:
-            parser.error(f"{given!r} is not LABEL=RUN_DIR")
-        print(row(label, read_curve(Path(run_dir)).up_to(args.up_to), start, end))
+            parser.error(f"{given!r} is not LABEL=RUN_DIR or LABEL=FILE.csv")
+        path = Path(where)
+        curve = read_peer_curve(path) if path.suffix == ".csv" else read_curve(path)
+        print(row(label, curve.up_to(args.up_to), start, end))
 
 
 if __name__ == "__main__":
