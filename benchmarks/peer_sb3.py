@@ -227,8 +227,9 @@ def main() -> None:
         )
         write_curve(args.run_dir.with_name(args.run_dir.name + "-sb3.csv"), curves[f"sb3 {args.peer}+her"])
     dtd_threads = read_config(RunDir(args.run_dir)).threads if not args.skip_dtd else "-"
+    shown_sb3_threads = "-" if args.skip_sb3 else sb3_threads
     print(f"# {args.env}, seed {args.seed}, {args.steps} env steps, {platform.machine()}, "
-          f"torch threads: dtd {dtd_threads}, sb3 {sb3_threads}")  # fmt: skip
+          f"torch threads: dtd {dtd_threads}, sb3 {shown_sb3_threads}")  # fmt: skip
     header = f"{'library':<14} {'to 0.5 success':>22} {'to 0.9 success':>22}"
     print(f"{header} {'final':>6} {'wall':>7} {'steps/s':>8}")
     for name, curve in curves.items():
