@@ -64,7 +64,12 @@ def main() -> None:
     parser.add_argument("--window", type=float, nargs=2, metavar=("START", "END"), default=(0.0, np.inf))
     args = parser.parse_args()
     start, end = args.window
-    window = f"mean {start / 1000:.0f}k-{min(end, args.up_to) / 1000:.0f}k"
+    last = min(end, args.up_to)
+    window = (
+        f"mean {start / 1000:.0f}k-{last / 1000:.0f}k"
+        if np.isfinite(last)
+        else f"mean after {start / 1000:.0f}k"
+    )
     levels = " | ".join(f"to {level}" for level in LEVELS)
     print(f"| run | {levels} | {window} | last 5 | steps | wall |")
     print("|---" * (len(LEVELS) + 5) + "|")
