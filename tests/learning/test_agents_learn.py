@@ -137,7 +137,6 @@ def test_agents_learn_a_task_that_ends_on_reaching_the_goal(tmp_path, algo):
         test_episodes=20,
         threads=1,
         collector=Collection.inline,
-        precision=Precision.float32,
         learner=learner,
         dtd=DotToDotConfig(
             subgoal_max_distance=0.5,
