@@ -5,6 +5,11 @@ in each format, measured in the same run.
 
     python benchmarks/updates.py --updates 300
     python benchmarks/updates.py --learners tqc --hidden-sizes 512 512 512 --batch-size 512
+    python benchmarks/updates.py --learners ddpg --split
+
+With ``--split``, the time of an update is also split (by torch's profiler, whose own cost lands
+in "the rest") into the matrix products and everything else: the bound on what a faster format
+of the products can gain is (products + rest) / rest.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ import time
 
 import numpy as np
 import torch
+from torch.profiler import ProfilerActivity, profile
 from torch.utils.flop_counter import FlopCounterMode
 
 from dtd.agents.learner import GoalLearner
@@ -26,6 +32,7 @@ from dtd.config import LearnerConfig, LearnerKind
 
 OBS, GOAL, ACT = 25, 3, 4  # FetchPush
 DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16}
+MATRIX_PRODUCTS = frozenset({"aten::mm", "aten::addmm", "aten::bmm", "aten::baddbmm"})
 
 
 def random_batch(rng: np.random.Generator, size: int) -> Batch:
@@ -59,6 +66,7 @@ def main() -> None:
     parser.add_argument("--hidden-sizes", type=int, nargs="+", default=list(LearnerConfig.hidden_sizes))
     parser.add_argument("--batch-size", type=int, default=LearnerConfig.batch_size)
     parser.add_argument("--precisions", nargs="+", default=list(DTYPES), choices=list(DTYPES))
+    parser.add_argument("--split", action="store_true", help="split each update's time: products / rest")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
 
@@ -74,8 +82,9 @@ def main() -> None:
         big, layer = peaks[name] / 1e9, layers[name] / 1e9
         print(f"{name} matmul 1024^3 {big:.1f} GFLOP/s, {width}^3 {layer:.1f} GFLOP/s")
     columns = "MFLOP per update | ms per update | x float32 | GFLOP/s | of 1024^3"
-    print(f"| learner | precision | {columns} | of {width}^3 |")
-    print("|---|---|---|---|---|---|---|---|")
+    split_column = " ms in products + the rest |" if args.split else ""
+    print(f"| learner | precision | {columns} | of {width}^3 |{split_column}")
+    print("|---|---|---|---|---|---|---|---|" + ("---|" if args.split else ""))
     for name in args.learners:
         config = dataclasses.replace(base, learner=LearnerKind(name))
         float32_ms = None
@@ -91,7 +100,11 @@ def main() -> None:
             achieved = rate * flops
             shares = f"{achieved / peaks[precision]:.1%} | {achieved / layers[precision]:.1%}"
             measured = f"{flops / 1e6:.1f} | {ms:.2f} | {speedup} | {achieved / 1e9:.1f}"
-            print(f"| {name} | {precision} | {measured} | {shares} |")
+            split = ""
+            if args.split:
+                products, rest = time_split(learner, batches[: min(50, len(batches))])
+                split = f" {products:.2f} + {rest:.2f} |"
+            print(f"| {name} | {precision} | {measured} | {shares} |{split}")
 
 
 def fresh_learner(
@@ -110,6 +123,19 @@ def update_rate(learner: GoalLearner, batches: list[Batch]) -> float:
     for batch in batches:
         learner.update(batch)
     return len(batches) / (time.perf_counter() - start)
+
+
+def time_split(learner: GoalLearner, batches: list[Batch]) -> tuple[float, float]:
+    """ms per update in the matrix products and in everything else, by the profiler's own
+    (self) CPU time of each operation."""
+    with profile(activities=[ProfilerActivity.CPU]) as profiler:
+        for batch in batches:
+            learner.update(batch)
+    events = profiler.key_averages()
+    products = sum(event.self_cpu_time_total for event in events if event.key in MATRIX_PRODUCTS)
+    total = sum(event.self_cpu_time_total for event in events)
+    per_update = 1000 * len(batches)  # profiler times are in microseconds
+    return products / per_update, (total - products) / per_update
 
 
 if __name__ == "__main__":
