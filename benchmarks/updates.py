@@ -24,7 +24,7 @@ import torch
 from torch.profiler import ProfilerActivity, profile
 from torch.utils.flop_counter import FlopCounterMode
 
-from dtd.agents.learner import GoalLearner
+from dtd.agents.goal_learner import GoalLearner
 from dtd.agents.learners import make_learner
 from dtd.agents.networks import BoxActionHead
 from dtd.agents.records import Batch

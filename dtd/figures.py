@@ -1,5 +1,6 @@
-"""Drawing matplotlib figures the way every figure of dtd is drawn (off screen) and kept (PNG and
-SVG side by side): below every wing, for the figures of sweeps and of explained runs alike."""
+"""Drawing matplotlib figures off screen, as every figure of dtd is drawn, and keeping a sweep's
+figures as PNG and SVG side by side (the key-frame strips and heatmaps of an explained run are
+PNG only)."""
 
 from __future__ import annotations
 

@@ -13,9 +13,9 @@ import numpy as np
 from dtd.agents import subgoal_report
 from dtd.agents.buffer import EpisodeBuffer
 from dtd.agents.exploration import ActionNoise
+from dtd.agents.goal_learner import GoalLearner
 from dtd.agents.her import GoalStrategy, HindsightSampling, relabel_probability
 from dtd.agents.interface import mean_metrics
-from dtd.agents.learner import GoalLearner
 from dtd.agents.networks import SubgoalHead
 from dtd.agents.records import Batch, Episodes
 from dtd.agents.rotations import multiply, random_rotations

@@ -8,9 +8,9 @@ import numpy as np
 
 from dtd.agents.buffer import EpisodeBuffer
 from dtd.agents.exploration import ActionNoise
+from dtd.agents.goal_learner import GoalLearner
 from dtd.agents.her import HindsightSampling
 from dtd.agents.interface import mean_metrics
-from dtd.agents.learner import GoalLearner
 from dtd.agents.records import Episodes
 from dtd.envs.goals import GoalFunctions
 

@@ -8,7 +8,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from dtd.agents.learner import GoalLearner
+from dtd.agents.goal_learner import GoalLearner
 from dtd.agents.records import Episodes
 
 

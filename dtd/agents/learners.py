@@ -6,7 +6,7 @@ import torch
 
 from dtd.agents.collective import ALONE, Collective
 from dtd.agents.ddpg import DDPGLearner
-from dtd.agents.learner import GoalLearner
+from dtd.agents.goal_learner import GoalLearner
 from dtd.agents.networks import ActionHead
 from dtd.agents.sac import SACLearner, TQCLearner
 from dtd.agents.td3 import TD3Learner

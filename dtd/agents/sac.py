@@ -10,7 +10,7 @@ from typing import Any
 import torch
 from torch import nn
 
-from dtd.agents.learner import GoalLearner, StepTensors
+from dtd.agents.goal_learner import GoalLearner, StepTensors
 from dtd.agents.networks import CriticEnsemble, GaussianActor
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from dtd.agents.learner import GoalLearner, StepTensors
+from dtd.agents.goal_learner import GoalLearner, StepTensors
 from dtd.agents.networks import Actor, CriticEnsemble
 
 

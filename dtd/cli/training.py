@@ -14,7 +14,7 @@ import tyro
 from dtd.cli.options import optional
 from dtd.config import TrainConfig
 from dtd.errors import DtdError
-from dtd.training.launch import ALONE_HERE, JobPlace
+from dtd.training.launch import JobPlace
 
 if TYPE_CHECKING:
     from dtd.training.lifecycle import StartPlan
@@ -27,7 +27,7 @@ def train(
     force: bool = False,
     progress: bool = True,
     oversubscribe: bool = False,
-    place: JobPlace = ALONE_HERE,
+    place: JobPlace = JobPlace(),
     invocation: tuple[str, ...] = (),
 ) -> None:
     """Train an agent; results land in the run directory.

@@ -30,6 +30,7 @@ from dtd.config.settings import (
     Preset,
     RelabelWindow,
     TrainConfig,
+    plain_data,
 )
 
 __all__ = [
@@ -51,6 +52,7 @@ __all__ = [
     "RelabelWindow",
     "TrainConfig",
     "flat_items",
+    "plain_data",
     "preset_config",
     "with_algorithm_defaults",
     "with_settings",

@@ -348,7 +348,7 @@ class TrainConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-ready data (enums as their values)."""
-        return _plain(dataclasses.asdict(self))
+        return plain_data(dataclasses.asdict(self))
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], written_before: bool = True) -> TrainConfig:
@@ -436,13 +436,17 @@ def _is_int(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
-def _plain(value: Any) -> Any:
+def plain_data(value: Any) -> Any:
+    """``value`` as JSON's data: mappings and sequences of plain values, enums as their values,
+    numpy's arrays and scalars as lists and numbers."""
     if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
+        return {key: plain_data(item) for key, item in value.items()}
     if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
+        return [plain_data(item) for item in value]
     if isinstance(value, enum.Enum):
         return value.value
+    if hasattr(value, "tolist"):  # a numpy array or scalar
+        return value.tolist()
     return value
 
 

@@ -89,7 +89,7 @@ def validate(config: TrainConfig) -> None:
             f"--hindsight-action-prob must lie in [0, 1], got {config.dtd.hindsight_action_prob}",
         ),
     ]
-    # The low level's batch may be 0: the algorithm's (LOW_LEVEL_BATCH).
+    # The low level's batch may be unset (None): its algorithm's.
     checks += _learner_checks(config.learner, "--", may_be_unset=True)
     checks += _learner_checks(config.dtd.high, "--high.", may_be_unset=False)
     for ok, message in checks:

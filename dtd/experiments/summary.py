@@ -126,7 +126,7 @@ def summary_table(rows: Sequence[GroupSummary]) -> str:
         epochs = str(row.epochs_max)
         if row.epochs_min < row.epochs_max:
             epochs = f"{row.epochs_min}-{row.epochs_max}"
-        cells = [row.env, row.label, str(row.runs), epochs, _spread_text(row.final_success, _plain)]
+        cells = [row.env, row.label, str(row.runs), epochs, _spread_text(row.final_success, _two_decimals)]
         cells.append(f"{span_text(row.final_episodes, str)} episodes")
         cells.append(span_text(row.final_env_steps, steps_text))
         for level in LEVELS:
@@ -159,7 +159,7 @@ def _spread_cells(spread: Spread, form: str) -> list[str]:
     return ["inf" if np.isinf(value) else form.format(value) for value in values]
 
 
-def _plain(value: float) -> str:
+def _two_decimals(value: float) -> str:
     return f"{value:.2f}"
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from dtd.agents.learner import GoalLearner
+from dtd.agents.goal_learner import GoalLearner
 from dtd.agents.segments import high_level_input
 
 

@@ -77,10 +77,6 @@ class JobPlace:
         return self.reports and not self.launched_here
 
 
-ALONE_HERE = JobPlace()
-"""A process that is a run of its own."""
-
-
 @dataclasses.dataclass(frozen=True)
 class WorkerEnd:
     """How one worker process ended."""

@@ -27,13 +27,13 @@ from dtd.training.components import (
     resolved_precision,
     resolved_threads,
 )
-from dtd.training.launch import ALONE_HERE, JobPlace
+from dtd.training.launch import JobPlace
 from dtd.training.progress import TrainingProgress
 from dtd.training.recorder import MetricsRecorder
 from dtd.training.run_dir import RunDir, read_config, write_config
 from dtd.training.run_lock import holding
 from dtd.training.trainer import Trainer, restore
-from dtd.training.workers import SOLO, WorkerGroup, join_group, leave_group
+from dtd.training.workers import WorkerGroup, join_group, leave_group
 
 # Settings that may change when a run is resumed; any other must stay as the run began.
 RESUMABLE_SETTINGS = frozenset({"epochs", "threads", "collector", "explore_snapshots", "device", "precision"})
@@ -135,7 +135,7 @@ def plan_start(
     run_dir: Path | str | None = None,
     resume: Path | str | None = None,
     force: bool = False,
-    place: JobPlace = ALONE_HERE,
+    place: JobPlace = JobPlace(),
     given: Collection[str] | None = None,
 ) -> StartPlan:
     """What :func:`train` would start or resume, checked before anything is built: the
@@ -185,7 +185,7 @@ def train(
     resume: Path | str | None = None,
     force: bool = False,
     show_progress: bool = True,
-    place: JobPlace = ALONE_HERE,
+    place: JobPlace = JobPlace(),
 ) -> TrainState:
     """Start a run in ``run_dir`` (default: runs/<env>-<algo>-s<seed>) or, with ``resume``,
     continue the run in that directory after its last finished epoch; train it to
@@ -199,13 +199,13 @@ def train(
     return train_planned(plan_start(config, run_dir, resume, force, place), show_progress, place)
 
 
-def train_planned(plan: StartPlan, show_progress: bool = True, place: JobPlace = ALONE_HERE) -> TrainState:
+def train_planned(plan: StartPlan, show_progress: bool = True, place: JobPlace = JobPlace()) -> TrainState:
     """Carry out ``plan`` (:func:`plan_start`) as the process at ``place``."""
     if not place.in_job and plan.workers > 1:
         raise ConfigError(
             f"a run of {plan.workers} workers is started by dtd train --workers {plan.workers} or by torchrun"
         )
-    group = join_group(plan.workers, place) if place.in_job else SOLO
+    group = join_group(plan.workers, place) if place.in_job else WorkerGroup()
     run = plan.run
     try:
         # Every worker has looked at the run directory before any of them writes to it.
@@ -230,7 +230,7 @@ def train_planned(plan: StartPlan, show_progress: bool = True, place: JobPlace =
 
 
 def _started(
-    plan: StartPlan, group: WorkerGroup = SOLO, local_workers: int = 1
+    plan: StartPlan, group: WorkerGroup = WorkerGroup(), local_workers: int = 1
 ) -> tuple[Components | None, TrainState]:
     """The run's components and counters: fresh for a new run, restored from a stopped run's
     last checkpoint (a data-parallel worker k > 0: from its shard of the epoch that checkpoint
@@ -275,7 +275,7 @@ def _train_started(
     components: Components,
     state: TrainState,
     show_progress: bool,
-    group: WorkerGroup = SOLO,
+    group: WorkerGroup = WorkerGroup(),
 ) -> TrainState:
     """Record the configuration, then train from ``state`` to ``config.epochs`` (worker 0 of
     data-parallel workers records and shows progress; the others only train)."""

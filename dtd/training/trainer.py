@@ -24,7 +24,7 @@ from dtd.training.progress import TrainingProgress
 from dtd.training.recorder import MetricsRecorder, Row
 from dtd.training.rollout import concatenate, episode_figures, run_many
 from dtd.training.run_dir import RunDir
-from dtd.training.workers import SOLO, WorkerGroup
+from dtd.training.workers import WorkerGroup
 
 
 class Trainer:
@@ -46,7 +46,7 @@ class Trainer:
         run: RunDir,
         recorder: MetricsRecorder | None,
         progress: TrainingProgress,
-        group: WorkerGroup = SOLO,
+        group: WorkerGroup = WorkerGroup(),
     ) -> None:
         self.config = config
         self.spec = spec

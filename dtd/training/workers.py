@@ -68,10 +68,6 @@ class WorkerGroup:
             self.collective.sum(np.zeros(1))
 
 
-SOLO = WorkerGroup()
-"""A run of one worker."""
-
-
 def join_group(workers: int, place: JobPlace) -> WorkerGroup:
     """Join the process group of the job ``place`` is in (torch.distributed reads the
     rendezvous from the environment torchrun's agent set); a job of another size than

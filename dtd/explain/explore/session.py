@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from dtd.agents.segments import episode_plan
-from dtd.config import EVAL_SEED
+from dtd.config import EVAL_SEED, plain_data
 from dtd.errors import CheckpointError, ConfigError, DtdError, EnvError, RunDirError
 from dtd.experiments.curves import read_curve
 from dtd.explain.heatmap import (
@@ -225,7 +225,7 @@ class Explorer:
         write_video(rendered.frames, self.videos / name)
         self._forget_old_videos()
         plan = plan_of(rendered.episode)[0] if plan_of else episode_plan(rendered.episode, 0, None)
-        return {"epoch": snapshot.epoch, "video": name, "plan": _plain(plan)}
+        return {"epoch": snapshot.epoch, "video": name, "plan": plain_data(plan)}
 
     def close(self) -> None:
         if self.renderer is not None:
@@ -304,16 +304,3 @@ class Explorer:
         videos = sorted(self.videos.glob("episode-*.mp4"), key=lambda path: path.stat().st_mtime_ns)
         for path in videos[:-KEPT_VIDEOS]:
             path.unlink(missing_ok=True)
-
-
-def _plain(value: Any) -> Any:
-    """``value`` with numpy scalars and arrays made JSON's."""
-    if isinstance(value, dict):
-        return {key: _plain(item) for key, item in value.items()}
-    if isinstance(value, list | tuple):
-        return [_plain(item) for item in value]
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
