@@ -7,13 +7,16 @@ part of dtd may use it.
 """
 
 from dtd.config.presets import (
-    PAPER_SETTINGS,
+    PAPER,
+    PRESETS,
+    TUNED,
     flat_items,
     preset_config,
     with_algorithm_defaults,
     with_settings,
 )
 from dtd.config.settings import (
+    CONFIG_FORMAT,
     EVAL_SEED,
     HIGH_LEVEL_DEFAULTS,
     LOW_LEVEL_BATCH,
@@ -31,15 +34,19 @@ from dtd.config.settings import (
     RelabelWindow,
     TrainConfig,
     plain_data,
+    read_settings,
 )
 
 __all__ = [
+    "CONFIG_FORMAT",
     "EVAL_SEED",
     "HIGH_LEVEL_DEFAULTS",
     "LOW_LEVEL_BATCH",
     "LOW_LEVEL_DEFAULTS",
     "LOW_LEVEL_N_STEP",
-    "PAPER_SETTINGS",
+    "PAPER",
+    "PRESETS",
+    "TUNED",
     "Algo",
     "Collection",
     "Device",
@@ -54,6 +61,7 @@ __all__ = [
     "flat_items",
     "plain_data",
     "preset_config",
+    "read_settings",
     "with_algorithm_defaults",
     "with_settings",
 ]

@@ -261,7 +261,7 @@ class DotToDotConfig:
 @dataclasses.dataclass(frozen=True)
 class TrainConfig:
     """A whole training run. Defaults are the ``tuned`` preset: the reference settings of OpenAI
-    baselines' HER except where docs/tuning.md measured better (``PAPER_SETTINGS`` lists the
+    baselines' HER except where docs/tuning.md measured better (``PAPER`` in presets.py holds the
     reference)."""
 
     env: str | None = None
@@ -351,16 +351,42 @@ class TrainConfig:
         return plain_data(dataclasses.asdict(self))
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any], written_before: bool = True) -> TrainConfig:
-        """Inverse of :meth:`to_dict`; unknown keys and values of the wrong type are a
-        :class:`ConfigError` naming the setting. With ``written_before`` (data an earlier dtd may
-        have written: a config.json, a checkpoint), missing keys take defaults (those of
-        :data:`SETTINGS_BEFORE_THEIR_KEY` their value from before the key existed), a 0 batch or
-        n-step reads as unset, and flat Dot-to-Dot settings as grouped; without it (settings
-        given now, :func:`with_settings`) every value is taken as it is."""
-        if isinstance(data, dict) and written_before:
-            data = _grouped(_unset_zeros({**SETTINGS_BEFORE_THEIR_KEY, **data}))
+    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
+        """Inverse of :meth:`to_dict`, every value taken as it is; unknown keys and values of the
+        wrong type are a :class:`ConfigError` naming the setting, missing keys take their
+        defaults. Settings a run stored in an earlier format: :func:`read_settings`."""
         return cls(**_typed_fields(cls, data, ""))
+
+
+CONFIG_FORMAT = 2
+"""The format of the settings a run writes (config.json's ``format``). Format 1 is every
+config.json written before the key existed."""
+
+
+def read_settings(data: Any, version: int = 1) -> TrainConfig:
+    """Settings a run stored in format ``version``, brought to :data:`CONFIG_FORMAT` one step at
+    a time, then read as :meth:`TrainConfig.from_dict` reads them."""
+    if not isinstance(version, int) or not 1 <= version <= CONFIG_FORMAT:
+        raise ConfigError(
+            f"settings of format {version!r}; this dtd reads formats 1 to {CONFIG_FORMAT} "
+            "(a newer dtd wrote them?)"
+        )
+    for step in range(version, CONFIG_FORMAT):
+        data = MIGRATIONS[step](data)
+    return TrainConfig.from_dict(data)
+
+
+def _from_format_1(data: Any) -> Any:
+    """Format 1 to 2: a key the run did not write takes the value runs used before it existed
+    (:data:`SETTINGS_BEFORE_THEIR_KEY`), a batch or n-step of 0 (an earlier "the algorithm's")
+    is unset, and Dot-to-Dot's settings written among the others go under ``dtd``."""
+    if not isinstance(data, dict):
+        return data
+    return _grouped(_unset_zeros({**SETTINGS_BEFORE_THEIR_KEY, **data}))
+
+
+MIGRATIONS = {1: _from_format_1}
+"""Each older format's step to the next."""
 
 
 def _unset_zeros(data: dict[str, Any]) -> dict[str, Any]:

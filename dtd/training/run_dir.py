@@ -30,7 +30,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from dtd.config import TrainConfig
+from dtd.config import CONFIG_FORMAT, TrainConfig, read_settings
 from dtd.errors import ConfigError, RunDirError
 from dtd.training.atomic import write_text_atomic
 
@@ -197,7 +197,12 @@ def package_versions() -> dict[str, str]:
 
 def write_config(run: RunDir, config: TrainConfig, derived: dict[str, Any]) -> None:
     """Write config.json atomically: the settings, facts derived from them and the task, versions."""
-    payload = {"config": config.to_dict(), "derived": derived, "versions": package_versions()}
+    payload = {
+        "format": CONFIG_FORMAT,
+        "config": config.to_dict(),
+        "derived": derived,
+        "versions": package_versions(),
+    }
     write_text_atomic(run.config, json.dumps(payload, indent=2) + "\n")
 
 
@@ -207,6 +212,6 @@ def read_config(run: RunDir) -> TrainConfig:
         raise RunDirError(f"no run in {run.root} (config.json is missing)")
     try:
         payload = json.loads(run.config.read_text())
-        return TrainConfig.from_dict(payload["config"])
+        return read_settings(payload["config"], payload.get("format", 1))
     except (json.JSONDecodeError, KeyError, TypeError, ConfigError) as exc:
         raise RunDirError(f"{run.config} is unreadable ({exc})") from exc

@@ -6,6 +6,7 @@ import re
 import pytest
 
 from dtd.config import (
+    CONFIG_FORMAT,
     Algo,
     DotToDotConfig,
     LearnerConfig,
@@ -14,6 +15,7 @@ from dtd.config import (
     TrainConfig,
     flat_items,
     preset_config,
+    read_settings,
     with_algorithm_defaults,
     with_settings,
 )
@@ -68,12 +70,14 @@ def test_n_step_is_the_algorithms_unless_given_and_one_for_runs_written_before_i
     assert with_algorithm_defaults(preset_config(Preset.paper, algo=Algo.dtd)).n_step == 1
     written = TrainConfig(algo=Algo.dtd).to_dict()
     assert written["n_step"] is None and TrainConfig.from_dict(written).n_step is None
-    # An earlier dtd wrote 0 for "the algorithm's".
-    assert TrainConfig.from_dict({**written, "n_step": 0}).n_step is None
+    # An earlier dtd wrote 0 for "the algorithm's" (format 1); given now, a 0 is a 0.
+    assert read_settings({**written, "n_step": 0}, 1).n_step is None
+    assert TrainConfig.from_dict({**written, "n_step": 0}).n_step == 0
     old_learner = {**written["learner"], "batch_size": 0}
-    assert TrainConfig.from_dict({**written, "learner": old_learner}).learner.batch_size is None
+    assert read_settings({**written, "learner": old_learner}, 1).learner.batch_size is None
     del written["n_step"]  # a config.json from before the setting existed
-    assert TrainConfig.from_dict(written).n_step == 1
+    assert read_settings(written, 1).n_step == 1
+    assert read_settings(written, CONFIG_FORMAT).n_step is None  # written now: the default
     with pytest.raises(ConfigError, match=r"--batch-size must be at least 1 \(left out: the algorithm's\)"):
         dataclasses.replace(VALID, learner=LearnerConfig(batch_size=0)).validate()
     with pytest.raises(ConfigError, match=r"--n-step must be at least 1 \(left out"):
@@ -127,7 +131,7 @@ def test_paper_preset_is_the_reference_and_options_override_it():
         ({"noise_eps": "0.2"}, "noise_eps must be a number, got '0.2'"),
         ({"env": 5}, "env must be a string, got 5"),
         ({"learner": {"hidden_sizes": [64, "wide"]}}, "learner.hidden_sizes must be a list of integers"),
-        ({"high": {"clip_return": 1}}, "high.clip_return must be true or false, got 1"),
+        ({"dtd": {"high": {"clip_return": 1}}}, "high.clip_return must be true or false, got 1"),
         ({"learner": [1, 2]}, "learner must be a mapping of settings"),
         ({"algo": "ppo"}, "unknown algo 'ppo'"),
     ],
@@ -152,9 +156,11 @@ def test_dot_to_dots_settings_are_one_group_read_also_from_runs_written_flat():
     assert TrainConfig.from_dict(data) == config
     # config.json of a run written before the settings were grouped: the same configuration.
     flat = {name: value for name, value in data.items() if name != "dtd"} | data["dtd"]
-    assert TrainConfig.from_dict(flat) == config
+    assert read_settings(flat, 1) == config
     with pytest.raises(ConfigError, match=r"high\.batch_size must be an integer"):
-        TrainConfig.from_dict({**flat, "high": {**data["dtd"]["high"], "batch_size": "x"}})
+        read_settings({**flat, "high": {**data["dtd"]["high"], "batch_size": "x"}}, 1)
+    with pytest.raises(ConfigError, match="unknown setting"):
+        read_settings(flat, CONFIG_FORMAT)  # written now, a flat setting is unknown
     with pytest.raises(ConfigError, match=r"unknown setting.*segmints"):
         TrainConfig.from_dict({**data, "dtd": {**data["dtd"], "segmints": 3}})
     # Option names stay as they were: no dtd. prefix anywhere a setting is named.

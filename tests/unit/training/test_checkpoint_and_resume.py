@@ -25,6 +25,7 @@ from dtd.config import (
     Preset,
     TrainConfig,
     preset_config,
+    read_settings,
     with_settings,
 )
 from dtd.envs.spec import EnvSpec
@@ -255,7 +256,7 @@ def test_a_run_records_the_precision_chosen_and_keeps_it_on_resume(monkeypatch, 
     # A config.json written before the setting existed was float32's.
     data = VALID.to_dict()
     del data["precision"]
-    assert TrainConfig.from_dict(data).precision is Precision.float32
+    assert read_settings(data, 1).precision is Precision.float32
     # On resume the run's own is kept, and may be changed.
     stored = dataclasses.replace(VALID, precision=Precision.bfloat16)
     assert resumed_config(stored, TrainConfig(epochs=80)).precision is Precision.bfloat16
