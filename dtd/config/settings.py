@@ -413,12 +413,25 @@ def _grouped(data: dict[str, Any]) -> dict[str, Any]:
 
 
 def _typed_fields(cls: type, data: Any, prefix: str) -> dict[str, Any]:
-    """The fields of dataclass ``cls`` in ``data``, each checked against its type."""
+    """The fields of dataclass ``cls`` in ``data``, each checked against its type; a group of
+    settings (a dataclass) is its default with the values given on top."""
     if not isinstance(data, dict):
         raise ConfigError(f"{prefix.rstrip('.') or 'the configuration'} must be a mapping of settings")
     _reject_unknown(cls, data)
     hints = typing.get_type_hints(cls)
-    return {name: _typed(prefix + name, value, hints[name]) for name, value in data.items()}
+    defaults = {field.name: field.default for field in dataclasses.fields(cls)}
+    typed = {}
+    for name, value in data.items():
+        if dataclasses.is_dataclass(hints[name]):
+            # Dot-to-Dot's settings are named as their options are, without a prefix.
+            inner = prefix if name in UNPREFIXED_GROUPS else f"{prefix}{name}."
+            typed[name] = dataclasses.replace(defaults[name], **_typed_fields(hints[name], value, inner))
+        else:
+            typed[name] = _typed(prefix + name, value, hints[name])
+    return typed
+
+
+UNPREFIXED_GROUPS = frozenset({"dtd"})
 
 
 def _typed(name: str, value: Any, kind: Any) -> Any:
@@ -429,11 +442,6 @@ def _typed(name: str, value: Any, kind: Any) -> Any:
         if value is None and len(options) < len(typing.get_args(kind)):
             return None
         (kind,) = options
-    if kind is LearnerConfig:
-        default = HIGH_LEVEL_DEFAULTS if name == "high" else LOW_LEVEL_DEFAULTS
-        return dataclasses.replace(default, **_typed_fields(LearnerConfig, value, f"{name}."))
-    if kind is DotToDotConfig:  # its settings are named as their options are, without a prefix
-        return DotToDotConfig(**_typed_fields(DotToDotConfig, value, ""))
     if isinstance(kind, type) and issubclass(kind, enum.Enum):
         try:
             return kind(value)
