@@ -57,13 +57,6 @@ def main(argv: list[str] | None = None) -> None:
         "export": deferred(export),
     }
     try:
-        if args[:1] == ["sweep"] and any(arg == "--algo" or arg.startswith("--algo=") for arg in args):
-            raise DtdError("dtd sweep takes --algos (comma-separated), not --algo")
-        if args[:1] == ["sweep"] and any(arg == "--workers" or arg.startswith("--workers=") for arg in args):
-            raise DtdError(
-                "dtd sweep takes --parallel N (trials at once), not --workers (dtd train's "
-                "data-parallel workers of one run)"
-            )
         registries = {
             "train": settings_registry(hints=REQUIRED_ENV_UNLESS_RESUMED),
             "sweep": settings_registry(omit=frozenset({"algo", "workers"})),

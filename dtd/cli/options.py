@@ -245,14 +245,20 @@ def parse_command(
 
 def one_line(message: str, args: list[str]) -> str:
     """tyro's boxed parse error as one line, pointing to the command's help."""
-    lines = []
+    lines, suggested, section, suggesting = [], [], 0, False
     for line in message.splitlines():
         text = line.strip().strip("│╭╮╰╯─").strip()
-        if line.strip().startswith("│ ─") or text.startswith("For full helptext"):
-            break
-        if text and not line.strip().startswith(("╭", "╰")):
+        if line.strip().startswith("│ ─"):
+            section += 1  # the message, then tyro's suggestions or the option's help, then a pointer
+        elif section == 0 and text and not line.strip().startswith(("╭", "╰")):
             lines.append(text)
+        elif section == 1 and text.startswith("Perhaps you meant"):
+            suggesting = True
+        elif section == 1 and suggesting and text.startswith("--"):
+            suggested.append(text.split()[0])
     text = " ".join(lines) or "cannot parse the command line"
+    if suggested:
+        text += f"; perhaps you meant {' or '.join(dict.fromkeys(suggested))}"
     option = r"(--[\w.-]+)"
     not_int = r"invalid literal for int\(\) with base 10"
     not_float = "could not convert string to float"

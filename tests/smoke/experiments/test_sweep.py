@@ -185,7 +185,7 @@ def test_sweep_refuses_algo_and_unknown_algos(tmp_path):
     result = dtd(*SWEEP, "--algo", "her", "--out", tmp_path)
     assert result.returncode == 2 and "--algos" in result.stderr
     result = dtd(*SWEEP, "--workers", "2", "--out", tmp_path / "never")
-    assert result.returncode == 2 and "--parallel N" in result.stderr and not (tmp_path / "never").exists()
+    assert result.returncode == 2 and "--workers" in result.stderr and not (tmp_path / "never").exists()
     result = dtd(*SWEEP[:4], "her,sac", "--out", tmp_path)
     assert result.returncode == 2 and "sac" in result.stderr
 
