@@ -207,11 +207,14 @@ def write_config(run: RunDir, config: TrainConfig, derived: dict[str, Any]) -> N
 
 
 def read_config(run: RunDir) -> TrainConfig:
-    """The configuration a run was started with, or :class:`RunDirError`."""
+    """The configuration a run was started with, checked as a new run's is, or
+    :class:`RunDirError`."""
     if not run.config.is_file():
         raise RunDirError(f"no run in {run.root} (config.json is missing)")
     try:
         payload = json.loads(run.config.read_text())
-        return read_settings(payload["config"], payload.get("format", 1))
+        config = read_settings(payload["config"], payload.get("format", 1))
+        config.validate()
+        return config
     except (json.JSONDecodeError, KeyError, TypeError, ConfigError) as exc:
         raise RunDirError(f"{run.config} is unreadable ({exc})") from exc

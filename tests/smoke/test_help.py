@@ -93,7 +93,7 @@ def test_required_and_missing_options_are_marked(pages):
         (["train", "--no-such-option", "1"], "--no-such-option"),
         (["nonsense"], "unknown command 'nonsense'"),
         (["sweep", "--algo", "her", "--env", "FetchReach-v4", "--out", "x"], "perhaps you meant --algos"),
-        (["sweep", "--workers", "2", "--env", "FetchReach-v4", "--out", "x"], "Unrecognized options: --workers"),
+        (["sweep", "--workers", "2", "--env", "FetchReach-v4", "--out", "x"], "Unrecognized options"),
     ],
 )
 def test_parse_errors_are_one_line(args, needle):
