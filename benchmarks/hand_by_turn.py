@@ -1,0 +1,59 @@
+"""What the high level of a trained Hand rotation run does, by how far its goal is turned from the
+block's start: success, where the first sub-goal lies along the shortest turn from the start to
+the goal (progress: 0 at the start, 1 at the goal) and how far off that turn (degrees), and how
+many sub-goals the low level reached. Deterministic episodes of the run's latest checkpoint, the
+evaluation seed that ``dtd eval`` uses, in three groups of equal size by the goal's turn.
+
+    python benchmarks/hand_by_turn.py runs/record/hand/HandManipulateBlockRotateZ-v1-dtd-s100 --episodes 100
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from dtd.training.rollout import run_many
+from dtd.training.trained_run import load_run
+
+GROUPS = 3
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("run_dir")
+    parser.add_argument("--episodes", type=int, default=100)
+    args = parser.parse_args()
+    with load_run(args.run_dir, envs=10) as loaded:
+        planner = loaded.agent.planner()
+        if planner is None or loaded.spec.quaternion is None:
+            raise SystemExit(f"{args.run_dir}: needs a dtd run on a task whose goals have a rotation")
+        episodes = run_many(loaded.envs, loaded.agent, loaded.spec, args.episodes, False, loaded.rng)
+        plans = planner.plan(episodes)
+        groups = planner.placement_by_distance(episodes, GROUPS)
+    turn = np.array([plan["angles"]["start_to_goal"] for plan in plans])
+    # The intermediate sub-goals' verdicts (the last segment's sub-goal is the task's goal).
+    reached = [np.mean(plan["reached"][:-1]) if plan["reached"][:-1] else np.nan for plan in plans]
+    print(
+        f"{args.run_dir}: {args.episodes} episodes, success {episodes.success.mean():.2f}, "
+        f"sub-goals reached {np.nanmean(reached):.2f}"
+    )
+    print(
+        "| goal's turn (degrees) | episodes | success | first sub-goal: progress along the turn "
+        "| off the turn (degrees) | sub-goals reached |"
+    )
+    print("|---|---|---|---|---|---|")
+    for group in groups:
+        low, high = group["goal_angle"]
+        members = (turn >= low - 0.5) & (turn <= high + 0.5)
+        print(
+            f"| {low:.0f} - {high:.0f} | {group['episodes']} | {group['success']:.2f} "
+            f"| {group['progress'][0]:.2f} | {group['off_line'][0]:.1f} "
+            f"| {np.nanmean(np.array(reached)[members]):.2f} |"
+        )
+
+
+if __name__ == "__main__":
+    main()
