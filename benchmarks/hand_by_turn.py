@@ -13,6 +13,8 @@ import argparse
 
 import numpy as np
 
+from dtd.agents.segments import goal_separation
+from dtd.agents.subgoal_report import goal_away
 from dtd.training.rollout import run_many
 from dtd.training.trained_run import load_run
 
@@ -33,9 +35,15 @@ def main() -> None:
         episodes = run_many(loaded.envs, loaded.agent, loaded.spec, args.episodes, False, loaded.rng)
         plans = planner.plan(episodes)
         groups = planner.placement_by_distance(episodes, GROUPS)
-    turn = np.array([plan["angles"]["start_to_goal"] for plan in plans])
+    # The groups as placement_by_distance makes them: the episodes whose goal is not met at their
+    # start, in order of the goal's turn, split in equal parts.
+    away = np.flatnonzero(goal_away(episodes, loaded.agent.goals.reached))
+    turn = goal_separation(
+        episodes.achieved_goal[away, 0], episodes.desired_goal[away], loaded.spec.quaternion
+    )
+    members = np.array_split(away[np.argsort(turn["angle"], kind="stable")], len(groups))
     # The intermediate sub-goals' verdicts (the last segment's sub-goal is the task's goal).
-    reached = [np.mean(plan["reached"][:-1]) if plan["reached"][:-1] else np.nan for plan in plans]
+    reached = np.array([np.mean(plan["reached"][:-1]) if plan["reached"][:-1] else np.nan for plan in plans])
     print(
         f"{args.run_dir}: {args.episodes} episodes, success {episodes.success.mean():.2f}, "
         f"sub-goals reached {np.nanmean(reached):.2f}"
@@ -45,13 +53,12 @@ def main() -> None:
         "| off the turn (degrees) | sub-goals reached |"
     )
     print("|---|---|---|---|---|---|")
-    for group in groups:
+    for group, rows in zip(groups, members, strict=True):
         low, high = group["goal_angle"]
-        members = (turn >= low - 0.5) & (turn <= high + 0.5)
         print(
             f"| {low:.0f} - {high:.0f} | {group['episodes']} | {group['success']:.2f} "
             f"| {group['progress'][0]:.2f} | {group['off_line'][0]:.1f} "
-            f"| {np.nanmean(np.array(reached)[members]):.2f} |"
+            f"| {np.nanmean(reached[rows]):.2f} |"
         )
 
 
