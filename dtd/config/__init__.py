@@ -6,6 +6,17 @@ and are never written back here. This package imports nothing of dtd but its err
 part of dtd may use it.
 """
 
+from dtd.config.choices import (
+    Algo,
+    Collection,
+    Device,
+    HighTarget,
+    LearnerKind,
+    Precision,
+    Preset,
+    RelabelWindow,
+)
+from dtd.config.plain import plain_data
 from dtd.config.presets import (
     PAPER,
     PRESETS,
@@ -16,26 +27,16 @@ from dtd.config.presets import (
     with_settings,
 )
 from dtd.config.settings import (
-    CONFIG_FORMAT,
     EVAL_SEED,
     HIGH_LEVEL_DEFAULTS,
     LOW_LEVEL_BATCH,
     LOW_LEVEL_DEFAULTS,
     LOW_LEVEL_N_STEP,
-    Algo,
-    Collection,
-    Device,
     DotToDotConfig,
-    HighTarget,
     LearnerConfig,
-    LearnerKind,
-    Precision,
-    Preset,
-    RelabelWindow,
     TrainConfig,
-    plain_data,
-    read_settings,
 )
+from dtd.config.stored import CONFIG_FORMAT, read_settings
 
 __all__ = [
     "CONFIG_FORMAT",

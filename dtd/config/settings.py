@@ -1,124 +1,43 @@
-"""The settings of a run as frozen dataclasses: every field's default, and its docstring as the
-option's help text; read back from and written to plain JSON data."""
+"""The settings of a run as frozen dataclasses: every field's default, its bound, and its
+docstring as the option's help text; read back from and written to plain JSON data."""
 
 from __future__ import annotations
 
 import dataclasses
-import enum
-import types
-import typing
 from typing import Annotated, Any
 
 import tyro
 
-from dtd.config.validation import validate
-from dtd.errors import ConfigError
+from dtd.config.choices import (
+    Algo,
+    Collection,
+    Device,
+    HighTarget,
+    LearnerKind,
+    Precision,
+    Preset,
+    RelabelWindow,
+)
+from dtd.config.plain import plain_data, typed_fields
+from dtd.config.validation import (
+    AT_LEAST_1,
+    AUTOMATIC_OR_MORE,
+    DISCOUNT,
+    FINITE,
+    GIVEN,
+    NOT_NEGATIVE,
+    POSITIVE,
+    PROBABILITY,
+    WIDTHS,
+    ZERO_OR_MORE,
+    at_least,
+    validate,
+    within,
+)
 
 EVAL_SEED = 1_000_003
 """Seed of evaluation episodes after training (dtd eval, render, heatmap, report, explore),
 apart from every seed a run trains with."""
-
-
-class Algo(enum.Enum):
-    """The agents this package trains."""
-
-    ddpg = "ddpg"
-    """Goal-conditioned DDPG, no relabelling."""
-    her = "her"
-    """DDPG with Hindsight Experience Replay (``future`` strategy)."""
-    dtd = "dtd"
-    """Dot-to-Dot: a high-level sub-goal policy over a low-level HER agent, HER at both levels."""
-
-    @property
-    def sets_subgoals(self) -> bool:
-        """Whether the agent has a high level that sets it sub-goals (plans, maps, sub-goal
-        figures)."""
-        return self is Algo.dtd
-
-
-class RelabelWindow(enum.Enum):
-    """How far ahead the low level of Dot-to-Dot draws its relabelled goals from."""
-
-    segment = "segment"
-    """Only from the segment of the transition: near goals, like the sub-goals it is given."""
-    episode = "episode"
-    """From anywhere later in the episode, as in plain HER."""
-
-
-class HighTarget(enum.Enum):
-    """What the high level of Dot-to-Dot learns the value of the segment before the last from."""
-
-    bootstrap = "bootstrap"
-    """Its reward plus the target critic where the last segment starts, with the goal as that
-    segment's sub-goal: Q1'(o', g, g), as the paper."""
-    observed = "observed"
-    """Its reward plus what the episode went on to earn against the goal: the last segment's
-    mean reward, then the final achieved goal's reward held for ever; no critic, so a
-    relabelled goal needs no value of Q1 where the sub-goal is the goal."""
-
-
-class Collection(enum.Enum):
-    """Where training episodes are collected. At the same ``--threads`` the run is the same
-    either way, step for step (with ``--collect-ahead`` or without); only the wall time
-    differs."""
-
-    auto = "auto"
-    """``process`` where a core is left beside the learner's torch threads, else ``inline``."""
-    inline = "inline"
-    """In the learner's process, between its updates."""
-    process = "process"
-    """In a process of its own beside the learner, during the learner's updates."""
-
-
-class LearnerKind(enum.Enum):
-    """The off-policy learners every agent (and each level of Dot-to-Dot) can be built on."""
-
-    ddpg = "ddpg"
-    """DDPG: a deterministic actor and one critic, exploring by the action noise settings."""
-    td3 = "td3"
-    """TD3: twin critics and the lower of their targets, target-policy smoothing, an actor
-    that steps every ``--actor-delay`` updates (Fujimoto et al., 2018)."""
-    sac = "sac"
-    """SAC: a squashed Gaussian actor exploring by its own samples, twin critics, an entropy
-    temperature tuned toward ``--target-entropy`` (Haarnoja et al., 2018)."""
-    tqc = "tqc"
-    """TQC: SAC's actor over ``--critics`` critics of ``--quantiles`` quantiles each, the top
-    ``--dropped-quantiles`` of each critic dropped from the pooled target (Kuznetsov et al.,
-    2020)."""
-
-
-class Device(enum.Enum):
-    """Where the learners' networks, optimisers and batches live."""
-
-    cpu = "cpu"
-    """The CPU."""
-    cuda = "cuda"
-    """The first CUDA GPU; an error where there is none."""
-    auto = "auto"
-    """CUDA where torch finds a GPU, else the CPU."""
-
-
-class Precision(enum.Enum):
-    """The number format of the networks' passes in an update."""
-
-    auto = "auto"
-    """bfloat16 where the device computes it natively and the algorithm's learning was shown equal
-    to float32's (``dtd`` with DDPG at both levels: ``BFLOAT16_SHOWN_EQUAL``), else float32; a
-    run records which it chose."""
-    float32 = "float32"
-    """Every pass in float32."""
-    bfloat16 = "bfloat16"
-    """Forward and backward passes in bfloat16 (autocast); parameters, Adam's state, the
-    normalisers, the target and the losses in float32; acting and evaluation in float32."""
-
-
-class Preset(enum.Enum):
-    """The defaults every setting starts from; options given beside it override them."""
-
-    tuned = "tuned"
-    """This library's defaults, measured on one machine (docs/tuning.md)."""
-    paper = "paper"
-    """The reference settings of HER and of the Dot-to-Dot paper, exactly."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -127,31 +46,31 @@ class LearnerConfig:
 
     learner: LearnerKind = LearnerKind.ddpg
     """The learner: ddpg, td3, sac or tqc."""
-    hidden_sizes: tuple[int, ...] = (256, 256, 256)
+    hidden_sizes: Annotated[tuple[int, ...], WIDTHS] = (256, 256, 256)
     """Widths of the hidden ReLU layers of actor and critic."""
     layer_norm: bool = False
     """Normalise each hidden layer of actor and critic (LayerNorm before the ReLU)."""
-    actor_lr: float = 1e-3
+    actor_lr: Annotated[float, POSITIVE] = 1e-3
     """Adam learning rate of the actor."""
-    critic_lr: float = 1e-3
+    critic_lr: Annotated[float, POSITIVE] = 1e-3
     """Adam learning rate of the critic."""
-    batch_size: int | None = 256
+    batch_size: Annotated[int | None, AT_LEAST_1] = 256
     """Transitions per update; unset (the low level's default): the algorithm's."""
-    polyak: float = 0.95
+    polyak: Annotated[float, PROBABILITY] = 0.95
     """Polyak coefficient of the target networks: target <- polyak * target + (1 - polyak) * online."""
-    action_l2: float = 1.0
+    action_l2: Annotated[float, NOT_NEGATIVE] = 1.0
     """Weight of the actor's penalty on the squared (scaled) action."""
-    gamma: float | None = None
+    gamma: Annotated[float | None, DISCOUNT] = None
     """Discount per step; None: 1 - 1/T, T being the episode's length in steps."""
     clip_return: bool = True
     """Clip the critic's target to the range of returns of the task's sparse reward, measured
     from the task (-1/0: [-1/(1-gamma), 0]; 0/1: [0, 1/(1-gamma)]); a dense reward is not
     clipped."""
-    norm_clip: float = 5.0
+    norm_clip: Annotated[float, POSITIVE] = 5.0
     """Normalised inputs are clipped to [-norm_clip, norm_clip]."""
-    obs_clip: float = 200.0
+    obs_clip: Annotated[float, POSITIVE] = 200.0
     """Raw observations and goals are clipped to [-obs_clip, obs_clip] before normalising."""
-    norm_eps: float = 0.01
+    norm_eps: Annotated[float, POSITIVE] = 0.01
     """Smallest standard deviation the running normalisers divide by."""
     xavier_init: bool = False
     """Initialise linear layers Glorot-uniform with zero biases, as OpenAI baselines' HER (off:
@@ -159,24 +78,24 @@ class LearnerConfig:
     actor_after_critic: bool = True
     """Step the actor against the critic its own step just updated (off: both gradients from
     the same parameters, as OpenAI baselines' HER)."""
-    critics: int = 2
+    critics: Annotated[int, AT_LEAST_1] = 2
     """td3, sac, tqc: critics learned side by side (ddpg has one)."""
-    actor_delay: int = 2
+    actor_delay: Annotated[int, AT_LEAST_1] = 2
     """td3: the actor (and its penalty) steps once every this many critic updates."""
-    target_noise: float = 0.2
+    target_noise: Annotated[float, NOT_NEGATIVE] = 0.2
     """td3: std of the Gaussian noise on the target actor's unit action (target-policy
     smoothing), as a fraction of the largest action."""
-    target_noise_clip: float = 0.5
+    target_noise_clip: Annotated[float, NOT_NEGATIVE] = 0.5
     """td3: that noise is clipped to [-this, this]."""
-    quantiles: int = 25
+    quantiles: Annotated[int, AT_LEAST_1] = 25
     """tqc: quantiles of the return each critic learns."""
-    dropped_quantiles: int = 2
+    dropped_quantiles: Annotated[int, ZERO_OR_MORE] = 2
     """tqc: the highest atoms dropped from the pooled target, per critic."""
     # FetchReach, her + sac, seed 0: from 1.0 the entropy bonus (about 2.6 a step) outweighed
     # the -1/0 reward and success stayed at 0-0.2 for 4 epochs; from 0.05, 0.7 after the first.
-    initial_temperature: float = 0.05
+    initial_temperature: Annotated[float, POSITIVE] = 0.05
     """sac, tqc: the entropy temperature at the start."""
-    target_entropy: float | None = None
+    target_entropy: Annotated[float | None, FINITE] = None
     """sac, tqc: the policy's entropy the temperature steers toward; None: minus the action's
     dimension (the high level's: the goal's)."""
 
@@ -194,10 +113,6 @@ given. With 3, Dot-to-Dot's low level reached 0.9 eval success on FetchPush at 1
 120k env steps (seeds 0-2) against 175k, 160k and 145k with one-step returns
 (docs/tuning.md); ``her`` and ``ddpg`` keep one-step returns, as the reference."""
 
-SETTINGS_BEFORE_THEIR_KEY = {"n_step": 1, "explore_snapshots": 0, "precision": "float32"}
-"""Settings whose default changed after runs were written without them: a ``config.json``
-without the key was written when the run used this value."""
-
 LOW_LEVEL_DEFAULTS = LearnerConfig(batch_size=None)
 """The learner of ``her``, ``ddpg`` and dtd's low level: the reference settings but the batch,
 which depends on the algorithm (``LOW_LEVEL_BATCH``)."""
@@ -213,37 +128,37 @@ class DotToDotConfig:
     """Settings of Dot-to-Dot alone: the segments an episode is cut into, how sub-goals are
     explored, how the high level relabels, and the high level's learner."""
 
-    segments: int = 2
+    segments: Annotated[int, at_least(2)] = 2
     """dtd: segments an episode is cut into; one sub-goal each, the last one being the goal."""
     # With 0.1 FetchPush passed 0.9 success within 200k steps on three seeds of three (one of
     # three with the reference's 0.05), and FetchPickAndPlace reached 0.5 at 215k, not 270k.
-    subgoal_sigma: float = 0.1
+    subgoal_sigma: Annotated[float, NOT_NEGATIVE] = 0.1
     """dtd: std of the Gaussian perturbation of the achieved goal proposed as a sub-goal (the
     paper: 0.05)."""
-    subgoal_rotation_angle: float = 0.0
+    subgoal_rotation_angle: Annotated[float, within(0, 180, " degrees")] = 0.0
     """dtd, goals with a rotation (the Hand tasks): perturbation sub-goals turn the achieved
     rotation by a random angle of at most this many degrees about a random axis (0: Gaussian
     noise of std --subgoal-sigma on the quaternion's entries)."""
-    subgoal_eps_start: float = 1.0
+    subgoal_eps_start: Annotated[float, PROBABILITY] = 1.0
     """dtd: probability of a perturbation sub-goal (instead of the high level's) at the start."""
-    subgoal_eps_floor: float = 0.1
+    subgoal_eps_floor: Annotated[float, PROBABILITY] = 0.1
     """dtd: the probability of a perturbation sub-goal after the decay."""
-    subgoal_eps_decay_epochs: float = 30.0
+    subgoal_eps_decay_epochs: Annotated[float, NOT_NEGATIVE] = 30.0
     """dtd: epochs over which that probability falls linearly from start to floor."""
-    subgoal_noise: float = 0.05
+    subgoal_noise: Annotated[float, NOT_NEGATIVE] = 0.05
     """dtd: std of the Gaussian exploration noise added to the high level's sub-goals."""
-    subgoal_max_distance: float = 0.3
+    subgoal_max_distance: Annotated[float, POSITIVE] = 0.3
     """dtd: sub-goals lie within this distance (per coordinate) of the achieved goal, inside the goal box."""
-    high_replay_k: int = 4
+    high_replay_k: Annotated[int, ZERO_OR_MORE] = 4
     """dtd: HER at the high level: goals replaced by later achieved goals in k/(k+1) of samples."""
-    hindsight_action_prob: float = 0.0
+    hindsight_action_prob: Annotated[float, PROBABILITY] = 0.0
     """dtd: probability of replacing a sampled sub-goal by the goal reached at its segment's end."""
     # On FetchPush the whole episode learned faster than the segment (0.95 against 0.86 at 300k).
     low_relabel_window: RelabelWindow = RelabelWindow.episode
     """dtd: where the low level's relabelled goals come from."""
     # It gets one transition per segment; with 10 FetchPush reached 0.97 success at 300k steps
     # (one seed), at a quarter of the high level's cost with 40.
-    high_updates_per_cycle: int = 10
+    high_updates_per_cycle: Annotated[int, AT_LEAST_1] = 10
     """dtd: gradient updates of the high level per cycle, spread among the low level's."""
     high_target: HighTarget = HighTarget.bootstrap
     """dtd: where the value of the segment before the last comes from: ``bootstrap``, the
@@ -258,13 +173,16 @@ class DotToDotConfig:
     """dtd: settings of the high level's learner."""
 
 
+DOT_TO_DOT_FIELDS = tuple(field.name for field in dataclasses.fields(DotToDotConfig))
+
+
 @dataclasses.dataclass(frozen=True)
 class TrainConfig:
     """A whole training run. Defaults are the ``tuned`` preset: the reference settings of OpenAI
     baselines' HER except where docs/tuning.md measured better (``PAPER`` in presets.py holds the
     reference)."""
 
-    env: str | None = None
+    env: Annotated[str | None, GIVEN] = None
     """Gymnasium id of a goal-conditioned environment, e.g. FetchPush-v4, or module:EnvId."""
     env_kwargs: tuple[str, ...] = ()
     """Keyword arguments of the environment's constructor (and of gym.make, e.g.
@@ -279,40 +197,40 @@ class TrainConfig:
     preset: Preset = Preset.tuned
     """Defaults of every other setting: ``tuned`` (docs/tuning.md) or ``paper`` (the reference
     settings of HER and the paper); the options given beside it override them."""
-    seed: int = 0
+    seed: Annotated[int, ZERO_OR_MORE] = 0
     """Seed of networks, environments, exploration and replay sampling."""
-    epochs: int = 50
+    epochs: Annotated[int, AT_LEAST_1] = 50
     """Number of epochs; each ends with an evaluation and a checkpoint."""
-    n_cycles: int = 50
+    n_cycles: Annotated[int, AT_LEAST_1] = 50
     """Cycles per epoch; a cycle collects episodes, then updates the learner."""
-    episodes_per_cycle: int = 2
+    episodes_per_cycle: Annotated[int, AT_LEAST_1] = 2
     """Episodes collected per cycle, one per training environment, stepped together."""
-    updates_per_cycle: int = 40
+    updates_per_cycle: Annotated[int, ZERO_OR_MORE] = 40
     """Gradient updates per cycle; the target networks move once after them."""
-    explore_snapshots: int = 100
+    explore_snapshots: Annotated[int, ZERO_OR_MORE] = 100
     """About how many agent-only snapshots (no replay, no optimiser) a run keeps in
     checkpoints/epochs/ for ``dtd explore``: one after every k-th epoch, k = ceil(epochs /
     this), and after the first and the last (every epoch when there are at most this many);
     0 keeps none."""
-    test_episodes: int = 10
+    test_episodes: Annotated[int, AT_LEAST_1] = 10
     """Deterministic evaluation episodes at the end of every epoch."""
-    buffer_size: int = 1_000_000
+    buffer_size: Annotated[int, AT_LEAST_1] = 1_000_000
     """Replay capacity in transitions (whole episodes are kept)."""
-    replay_k: int = 4
+    replay_k: Annotated[int, ZERO_OR_MORE] = 4
     """HER: relabelled goals per original one; a fraction k/(k+1) of samples is relabelled."""
-    past_goal_share: float = 0.0
+    past_goal_share: Annotated[float, PROBABILITY] = 0.0
     """HER: share of the relabelled goals that are goals given before (of a random stored
     step, any episode) instead of goals achieved later in the episode."""
-    n_step: int | None = None
+    n_step: Annotated[int | None, AT_LEAST_1] = None
     """Rewards summed per sampled transition before bootstrapping (n-step returns; dtd: the
     low level's), cut at the episode's end; 1 is one-step DDPG; unset: the algorithm's."""
-    noise_eps: float = 0.2
+    noise_eps: Annotated[float, NOT_NEGATIVE] = 0.2
     """Exploration: std of Gaussian action noise, as a fraction of the largest action."""
-    random_eps: float = 0.3
+    random_eps: Annotated[float, PROBABILITY] = 0.3
     """Exploration: probability of taking a uniformly random action instead."""
     # One thread by default: two OpenMP threads beside any other busy process wait for each
     # other and ran 2.5 to 4 times slower than one (benchmarks/contention.py, docs/results/speed.md).
-    threads: int = 0
+    threads: Annotated[int, AUTOMATIC_OR_MORE] = 0
     """Torch threads of the learner; 0: OMP_NUM_THREADS where it is set, else one. A run records
     the number in its config.json; runs with the same number on one machine are the same bit
     for bit. More than one is faster only on a machine nothing else is using."""
@@ -330,7 +248,7 @@ class TrainConfig:
     """Number format of the networks' passes in an update, at both levels: float32, bfloat16,
     or auto (bfloat16 where the device computes it natively and it learned as float32 did, else
     float32); a new run records the one chosen, and keeps it on resume unless given."""
-    workers: int | None = None
+    workers: Annotated[int | None, AT_LEAST_1] = None
     """Data-parallel workers (torch.distributed): each collects its own episodes into its own
     replay; every update's gradients are averaged over all and the input statistics summed.
     An epoch is n_cycles cycles on every worker. Unset: 1 for a new run (under torchrun, its
@@ -355,137 +273,4 @@ class TrainConfig:
         """Inverse of :meth:`to_dict`, every value taken as it is; unknown keys and values of the
         wrong type are a :class:`ConfigError` naming the setting, missing keys take their
         defaults. Settings a run stored in an earlier format: :func:`read_settings`."""
-        return cls(**_typed_fields(cls, data, ""))
-
-
-CONFIG_FORMAT = 2
-"""The format of the settings a run writes (config.json's ``format``). Format 1 is every
-config.json written before the key existed."""
-
-
-def read_settings(data: Any, version: int = 1) -> TrainConfig:
-    """Settings a run stored in format ``version``, brought to :data:`CONFIG_FORMAT` one step at
-    a time, then read as :meth:`TrainConfig.from_dict` reads them."""
-    if not isinstance(version, int) or not 1 <= version <= CONFIG_FORMAT:
-        raise ConfigError(
-            f"settings of format {version!r}; this dtd reads formats 1 to {CONFIG_FORMAT} "
-            "(a newer dtd wrote them?)"
-        )
-    for step in range(version, CONFIG_FORMAT):
-        data = MIGRATIONS[step](data)
-    return TrainConfig.from_dict(data)
-
-
-def _from_format_1(data: Any) -> Any:
-    """Format 1 to 2: a key the run did not write takes the value runs used before it existed
-    (:data:`SETTINGS_BEFORE_THEIR_KEY`), a batch or n-step of 0 (an earlier "the algorithm's")
-    is unset, and Dot-to-Dot's settings written among the others go under ``dtd``."""
-    if not isinstance(data, dict):
-        return data
-    return _grouped(_unset_zeros({**SETTINGS_BEFORE_THEIR_KEY, **data}))
-
-
-MIGRATIONS = {1: _from_format_1}
-"""Each older format's step to the next."""
-
-
-def _unset_zeros(data: dict[str, Any]) -> dict[str, Any]:
-    """Configuration data with the algorithm's batch and n-step unset where an earlier dtd wrote
-    0 for them."""
-    learner = data.get("learner")
-    if isinstance(learner, dict) and learner.get("batch_size") == 0:
-        data = {**data, "learner": {**learner, "batch_size": None}}
-    return {**data, "n_step": None} if data.get("n_step") == 0 else data
-
-
-DOT_TO_DOT_FIELDS = tuple(field.name for field in dataclasses.fields(DotToDotConfig))
-
-
-def _grouped(data: dict[str, Any]) -> dict[str, Any]:
-    """Configuration data with Dot-to-Dot's settings under ``dtd``, where a run written before
-    they were grouped has them among the others."""
-    flat = {name: data[name] for name in DOT_TO_DOT_FIELDS if name in data}
-    if not flat:
-        return data
-    rest = {name: value for name, value in data.items() if name not in flat}
-    group = rest.get("dtd", {})
-    return {**rest, "dtd": {**flat, **group} if isinstance(group, dict) else group}
-
-
-def _typed_fields(cls: type, data: Any, prefix: str) -> dict[str, Any]:
-    """The fields of dataclass ``cls`` in ``data``, each checked against its type; a group of
-    settings (a dataclass) is its default with the values given on top."""
-    if not isinstance(data, dict):
-        raise ConfigError(f"{prefix.rstrip('.') or 'the configuration'} must be a mapping of settings")
-    _reject_unknown(cls, data)
-    hints = typing.get_type_hints(cls)
-    defaults = {field.name: field.default for field in dataclasses.fields(cls)}
-    typed = {}
-    for name, value in data.items():
-        if dataclasses.is_dataclass(hints[name]):
-            # Dot-to-Dot's settings are named as their options are, without a prefix.
-            inner = prefix if name in UNPREFIXED_GROUPS else f"{prefix}{name}."
-            typed[name] = dataclasses.replace(defaults[name], **_typed_fields(hints[name], value, inner))
-        else:
-            typed[name] = _typed(prefix + name, value, hints[name])
-    return typed
-
-
-UNPREFIXED_GROUPS = frozenset({"dtd"})
-
-
-def _typed(name: str, value: Any, kind: Any) -> Any:
-    """``value`` as a value of type ``kind`` (a JSON list becomes a tuple, an int a float), or
-    :class:`ConfigError` naming the setting."""
-    if typing.get_origin(kind) in (typing.Union, types.UnionType):
-        options = [option for option in typing.get_args(kind) if option is not type(None)]
-        if value is None and len(options) < len(typing.get_args(kind)):
-            return None
-        (kind,) = options
-    if isinstance(kind, type) and issubclass(kind, enum.Enum):
-        try:
-            return kind(value)
-        except ValueError as exc:
-            raise ConfigError(f"unknown {name} {value!r}") from exc
-    if typing.get_origin(kind) is tuple:
-        item_kind = typing.get_args(kind)[0]
-        accepts_item = _is_int if item_kind is int else (lambda item: isinstance(item, str))
-        if isinstance(value, list | tuple) and all(accepts_item(item) for item in value):
-            return tuple(value)
-        items = "integers" if item_kind is int else "strings"
-        raise ConfigError(f"{name} must be a list of {items}, got {value!r}")
-    checks = {
-        bool: (lambda v: isinstance(v, bool), "true or false"),
-        int: (_is_int, "an integer"),
-        float: (lambda v: _is_int(v) or isinstance(v, float), "a number"),
-        str: (lambda v: isinstance(v, str), "a string"),
-    }
-    accepts, expected = checks[kind]
-    if not accepts(value):
-        raise ConfigError(f"{name} must be {expected}, got {value!r}")
-    return float(value) if kind is float else value
-
-
-def _is_int(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
-def plain_data(value: Any) -> Any:
-    """``value`` as JSON's data: mappings and sequences of plain values, enums as their values,
-    numpy's arrays and scalars as lists and numbers."""
-    if isinstance(value, dict):
-        return {key: plain_data(item) for key, item in value.items()}
-    if isinstance(value, list | tuple):
-        return [plain_data(item) for item in value]
-    if isinstance(value, enum.Enum):
-        return value.value
-    if hasattr(value, "tolist"):  # a numpy array or scalar
-        return value.tolist()
-    return value
-
-
-def _reject_unknown(cls: type, data: dict[str, Any]) -> None:
-    names = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - names)
-    if unknown:
-        raise ConfigError(f"unknown setting(s) in configuration: {', '.join(unknown)}")
+        return cls(**typed_fields(cls, data, ""))
