@@ -41,8 +41,9 @@ class EpisodeBuffer:
     def for_transitions(
         cls, transitions: int, horizon: int, obs_dim: int, goal_dim: int, action_dim: int
     ) -> EpisodeBuffer:
-        """A buffer holding ``transitions`` steps' worth of whole episodes (at least one)."""
-        return cls(max(1, transitions // horizon), horizon, obs_dim, goal_dim, action_dim)
+        """A buffer holding ``transitions`` steps' worth of whole episodes (``transitions`` holds
+        one at least)."""
+        return cls(transitions // horizon, horizon, obs_dim, goal_dim, action_dim)
 
     def add(self, episodes: Episodes) -> None:
         """Store a batch of episodes, wrapping around when full."""

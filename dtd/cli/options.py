@@ -15,7 +15,6 @@ import dataclasses
 import functools
 import inspect
 import io
-import re
 import sys
 import typing
 from collections.abc import Callable, Mapping, Sequence
@@ -259,16 +258,5 @@ def one_line(message: str, args: list[str]) -> str:
     text = " ".join(lines) or "cannot parse the command line"
     if suggested:
         text += f"; perhaps you meant {' or '.join(dict.fromkeys(suggested))}"
-    option = r"(--[\w.-]+)"
-    not_int = r"invalid literal for int\(\) with base 10"
-    not_float = "could not convert string to float"
-    choices = r"Expected one of \((.*)\)\."
-    rewrites = [
-        (rf"Error parsing {option}: {not_int}: (.*)", r"\1 takes an integer, got \2"),
-        (rf"Error parsing {option}: {not_float}: (.*)", r"\1 takes a number, got \2"),
-        (rf"invalid choice (.*) for argument '{option}'\. {choices}", r"\2: \1 is none of \3"),
-    ]
-    for pattern, replacement in rewrites:
-        text = re.sub(pattern, replacement, text)
     command = args[0] if args and not args[0].startswith("-") else ""
     return f"{text} (see dtd {command + ' ' if command else ''}--help)"

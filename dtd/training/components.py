@@ -159,7 +159,6 @@ def build_acting(
     environments, all seeded from ``config.seed`` as :func:`build` seeds them; ``eval_seed``
     seeds the environments apart from training (``dtd eval``). ``config`` has been checked: a
     plan's (:func:`dtd.training.lifecycle.plan_start`) or a run's own (:func:`read_config`)."""
-    assert config.env is not None
     torch.set_num_threads(resolved_threads(config.threads))
     torch.manual_seed(config.seed)
     seeds = _run_seeds(config, worker)
@@ -329,7 +328,6 @@ def _exploring_side(
 ) -> tuple[list[gym.Env], Agent, EnvSpec, np.random.Generator]:
     """The training environments and exploration generator; with no ``agent``, also a copy
     that only acts (in a collecting process: it holds no replay)."""
-    assert config.env is not None
     train, spec = seeded_envs(config, config.episodes_per_cycle, train_seq)
     if agent is None:
         # It only acts, between the learner's updates: on the CPU, wherever the learner is.

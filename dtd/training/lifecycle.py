@@ -200,13 +200,14 @@ def train(
 
 
 def train_planned(plan: StartPlan, show_progress: bool = True, place: JobPlace = JobPlace()) -> TrainState:
-    """Carry out ``plan`` (:func:`plan_start`) as the process at ``place``."""
+    """Carry out ``plan`` (:func:`plan_start`) as the process at ``place``: hold and open the run
+    directory, build the run (restored from a stopped run's last checkpoint), train it."""
     if not place.in_job and plan.workers > 1:
         raise ConfigError(
             f"a run of {plan.workers} workers is started by dtd train --workers {plan.workers} or by torchrun"
         )
     group = join_group(plan.workers, place) if place.in_job else WorkerGroup()
-    run = plan.run
+    run, settings = plan.run, plan.settings
     try:
         # Every worker has looked at the run directory before any of them writes to it.
         group.barrier()
@@ -215,10 +216,22 @@ def train_planned(plan: StartPlan, show_progress: bool = True, place: JobPlace =
             holding(run.root) if group.writes else contextlib.nullcontext(),
             run.starting(replace=plan.force) if starting else contextlib.nullcontext(),
         ):
-            components, state = _started(plan, group, place.local_workers)
-            # A run trained to its end already has no components: nothing is built or written.
-            if components is not None:
-                state = _train_started(plan, components, state, show_progress, group)
+            latest = _latest_checkpoint(plan, group) if plan.resuming else None
+            state = TrainState()
+            if latest is not None:
+                with restoring(run.latest):
+                    state = latest.train_state()
+            # A run trained to its end already is left as it is: nothing is built or written.
+            if state.epoch < settings.epochs:
+                components = build(
+                    settings,
+                    worker=group.rank,
+                    collective=group.collective,
+                    local_workers=place.local_workers,
+                )
+                if latest is not None:
+                    state = _restored(latest, plan, components, state, group)
+                state = _train_built(plan, components, state, show_progress, group)
             group.barrier()  # every worker is done before any leaves the group
             return state
     except (KeyboardInterrupt, WorkerLost) as stop:
@@ -229,48 +242,36 @@ def train_planned(plan: StartPlan, show_progress: bool = True, place: JobPlace =
             leave_group()
 
 
-def _started(
-    plan: StartPlan, group: WorkerGroup = WorkerGroup(), local_workers: int = 1
-) -> tuple[Components | None, TrainState]:
-    """The run's components and counters: fresh for a new run, restored from a stopped run's
-    last checkpoint (a data-parallel worker k > 0: from its shard of the epoch that checkpoint
-    holds); no components when the run has already trained ``config.epochs`` epochs."""
-    run, settings = plan.run, plan.settings
-
-    def built() -> Components:
-        return build(settings, worker=group.rank, collective=group.collective, local_workers=local_workers)
-
-    if not plan.resuming:
-        return built(), TrainState()
+def _latest_checkpoint(plan: StartPlan, group: WorkerGroup) -> Checkpoint | None:
+    """A stopped run's last checkpoint, after the leftovers of the process that stopped are
+    cleared; None for a run killed during its first epoch (it starts again)."""
+    run = plan.run
     if group.writes:
         remove_stale_temporaries(run.root)  # half-written files of the process that was killed
         # A run set aside by a forced start that was killed before its first epoch: resuming
         # the new run gives it up.
         shutil.rmtree(run.set_aside, ignore_errors=True)
-    # A run killed during its first epoch has no checkpoint yet: it starts again.
-    latest = Checkpoint.read(run.latest) if run.latest.exists() else None
-    if latest is not None:
-        with restoring(run.latest):
-            trained = latest.train_state()
-        if trained.epoch >= settings.epochs:
-            return None, trained
-    components = built()
-    if latest is None:
-        return components, TrainState()
+    return Checkpoint.read(run.latest) if run.latest.exists() else None
+
+
+def _restored(
+    latest: Checkpoint, plan: StartPlan, components: Components, trained: TrainState, group: WorkerGroup
+) -> TrainState:
+    """The counters of a stopped run, its agent, random state, collector and environments put
+    back as ``latest`` holds them (a data-parallel worker k > 0: from its shard of that epoch)."""
+    run = plan.run
     path = run.latest if group.writes else run.worker_shard(group.rank, trained.epoch)
     try:
         checkpoint = latest if group.writes else Checkpoint.read(path)
-        checkpoint.check_fits(settings, components.spec, path)
-        state = restore(
-            checkpoint, components.agent, components.rng, components.collector, components.envs, path
-        )
+        checkpoint.check_fits(plan.settings, components.spec, path)
+        parts = (components.agent, components.rng, components.collector, components.envs)
+        return restore(checkpoint, *parts, path)
     except CheckpointError:
         components.close()
         raise
-    return components, state
 
 
-def _train_started(
+def _train_built(
     plan: StartPlan,
     components: Components,
     state: TrainState,

@@ -87,8 +87,8 @@ def test_required_and_missing_options_are_marked(pages):
 @pytest.mark.parametrize(
     ("args", "needle"),
     [
-        (["train", "--epochs", "abc"], "--epochs takes an integer, got 'abc'"),
-        (["train", "--algo", "foo"], "'foo' is none of"),
+        (["train", "--epochs", "abc"], "Error parsing --epochs: invalid literal for int() with base 10: 'abc'"),
+        (["train", "--algo", "foo"], "invalid choice 'foo' for argument '--algo'"),
         (["eval"], "RUN_DIR"),
         (["train", "--no-such-option", "1"], "--no-such-option"),
         (["nonsense"], "unknown command 'nonsense'"),

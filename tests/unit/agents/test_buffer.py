@@ -1,6 +1,7 @@
 """The episode ring: capacity, wrap-around, and whole episodes kept together."""
 
 import numpy as np
+import pytest
 
 from dtd.agents.buffer import EpisodeBuffer
 from dtd.agents.records import Episodes
@@ -28,7 +29,9 @@ def episodes_numbered(first: int, count: int) -> Episodes:
 
 def test_capacity_in_whole_episodes():
     assert EpisodeBuffer.for_transitions(1_000_000, 50, OBS, GOAL, ACT).capacity == 20_000
-    assert EpisodeBuffer.for_transitions(10, 50, OBS, GOAL, ACT).capacity == 1
+    assert EpisodeBuffer.for_transitions(149, 50, OBS, GOAL, ACT).capacity == 2
+    with pytest.raises(ValueError, match="at least one episode"):
+        EpisodeBuffer.for_transitions(10, 50, OBS, GOAL, ACT)
 
 
 def test_wraps_around_overwriting_the_oldest_episodes():
