@@ -14,7 +14,6 @@ from dtd.config import EVAL_SEED
 from dtd.errors import DtdError
 
 RunDirArgument = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN_DIR")]
-HEATMAP_HEIGHTS = "the table's; on FetchPickAndPlace also 0.1, 0.2, 0.3 m above"
 
 
 def evaluate(

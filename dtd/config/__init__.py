@@ -37,6 +37,7 @@ from dtd.config.settings import (
     TrainConfig,
 )
 from dtd.config.stored import CONFIG_FORMAT, read_settings
+from dtd.config.validation import required_env
 
 __all__ = [
     "CONFIG_FORMAT",
@@ -63,6 +64,7 @@ __all__ = [
     "plain_data",
     "preset_config",
     "read_settings",
+    "required_env",
     "with_algorithm_defaults",
     "with_settings",
 ]

@@ -140,4 +140,4 @@ def with_settings(config: TrainConfig, settings: Sequence[str]) -> TrainConfig:
             target[leaf] = json.loads(value)
         except json.JSONDecodeError:
             target[leaf] = value
-    return TrainConfig.from_dict(data)  # a 0 given is a 0, refused by validate
+    return TrainConfig.from_dict(data)  # a 0 given is a 0, refused as its option is

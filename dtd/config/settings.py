@@ -21,18 +21,18 @@ from dtd.config.choices import (
 from dtd.config.plain import plain_data, typed_fields
 from dtd.config.validation import (
     AT_LEAST_1,
+    AT_LEAST_2,
     AUTOMATIC_OR_MORE,
     DISCOUNT,
     FINITE,
     GIVEN,
+    HALF_TURN,
     NOT_NEGATIVE,
     POSITIVE,
     PROBABILITY,
     WIDTHS,
     ZERO_OR_MORE,
-    at_least,
     validate,
-    within,
 )
 
 EVAL_SEED = 1_000_003
@@ -128,14 +128,14 @@ class DotToDotConfig:
     """Settings of Dot-to-Dot alone: the segments an episode is cut into, how sub-goals are
     explored, how the high level relabels, and the high level's learner."""
 
-    segments: Annotated[int, at_least(2)] = 2
+    segments: Annotated[int, AT_LEAST_2] = 2
     """dtd: segments an episode is cut into; one sub-goal each, the last one being the goal."""
     # With 0.1 FetchPush passed 0.9 success within 200k steps on three seeds of three (one of
     # three with the reference's 0.05), and FetchPickAndPlace reached 0.5 at 215k, not 270k.
     subgoal_sigma: Annotated[float, NOT_NEGATIVE] = 0.1
     """dtd: std of the Gaussian perturbation of the achieved goal proposed as a sub-goal (the
     paper: 0.05)."""
-    subgoal_rotation_angle: Annotated[float, within(0, 180, " degrees")] = 0.0
+    subgoal_rotation_angle: Annotated[float, HALF_TURN] = 0.0
     """dtd, goals with a rotation (the Hand tasks): perturbation sub-goals turn the achieved
     rotation by a random angle of at most this many degrees about a random axis (0: Gaussian
     noise of std --subgoal-sigma on the quaternion's entries)."""
@@ -260,8 +260,9 @@ class TrainConfig:
     learner (options without a prefix, but ``--high.<name>``); given to another algorithm,
     they are refused."""
 
-    def validate(self) -> None:
-        """Raise :class:`ConfigError` naming the first setting that cannot work."""
+    def __post_init__(self) -> None:
+        """Every setting within its bound, checked where the settings are made (parsed, read
+        from a run, replaced): a :class:`ConfigError` naming the first that is not."""
         validate(self)
 
     def to_dict(self) -> dict[str, Any]:

@@ -4,6 +4,7 @@ and :func:`validate` checks them all, failing with the option's name and what it
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import typing
 from collections.abc import Callable
@@ -29,6 +30,8 @@ def within(low: float, high: float, unit: str = "") -> Bound:
 
 
 AT_LEAST_1 = at_least(1)
+AT_LEAST_2 = at_least(2)
+HALF_TURN = within(0, 180, " degrees")
 ZERO_OR_MORE = Bound(lambda value: value >= 0, "be 0 or more")
 NOT_NEGATIVE = Bound(lambda value: math.isfinite(value) and value >= 0, "be >= 0")
 POSITIVE = Bound(lambda value: math.isfinite(value) and value > 0, "be > 0")
@@ -46,8 +49,8 @@ UNSET_BY_ALGORITHM = frozenset({"--batch-size", "--n-step"})
 def validate(settings: Any, prefix: str = "--") -> None:
     """Raise :class:`ConfigError` naming the first setting of the dataclass ``settings`` (and of
     its groups of settings) outside its bound; an unset value (None) passes where its option
-    may be left out, and ``--env`` must be given."""
-    hints = typing.get_type_hints(type(settings), include_extras=True)
+    may be left out (``--env`` until a run starts: :func:`required_env`)."""
+    hints = _annotations(type(settings))
     for field in dataclasses.fields(settings):
         value, option = getattr(settings, field.name), prefix + field.name.replace("_", "-")
         if dataclasses.is_dataclass(value):
@@ -55,8 +58,6 @@ def validate(settings: Any, prefix: str = "--") -> None:
             continue
         bounds = [item for item in getattr(hints[field.name], "__metadata__", ()) if isinstance(item, Bound)]
         if value is None:
-            if option == "--env":
-                raise ConfigError("--env is required")
             if option == "--high.batch-size":
                 raise ConfigError(f"{option} must be at least 1, got None")
             continue
@@ -67,3 +68,15 @@ def validate(settings: Any, prefix: str = "--") -> None:
     dropped, quantiles = getattr(settings, "dropped_quantiles", 0), getattr(settings, "quantiles", 1)
     if dropped >= quantiles:
         raise ConfigError(f"{prefix}dropped-quantiles must be fewer than {prefix}quantiles, got {dropped}")
+
+
+@functools.cache
+def _annotations(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls, include_extras=True)
+
+
+def required_env(env: str | None) -> str:
+    """The environment of a run to start, which must be given."""
+    if env is None:
+        raise ConfigError("--env is required")
+    return env

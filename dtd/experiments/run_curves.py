@@ -104,7 +104,7 @@ def find_runs(directories: Sequence[Path]) -> list[RunCurve]:
         run = RunCurve(run_dir, config.env or "?", config.algo.value, curve, config.test_episodes)
         # What the algorithm chose counts as given: runs that recorded it and runs that left it
         # to the algorithm are the same trial.
-        trial = dataclasses.replace(with_algorithm_defaults(config), epochs=0, collector=Collection.auto)
+        trial = dataclasses.replace(with_algorithm_defaults(config), epochs=1, collector=Collection.auto)
         if trial in trials:
             kept, dropped = sorted([trials[trial], run], key=lambda r: len(r.curve), reverse=True)
             warnings.warn(

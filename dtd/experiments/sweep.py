@@ -18,7 +18,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from dtd.config import Algo, TrainConfig, with_settings
+from dtd.config import Algo, TrainConfig, required_env, with_settings
 from dtd.errors import ConfigError
 from dtd.experiments.trials import Trial, TrialOutcome, run_local, run_ray, sharing_cores, trials_root
 from dtd.training.components import usable_cores
@@ -88,6 +88,7 @@ def sweep_trials(
     and ``seeds`` seeds from ``base.seed``; ordered seed by seed, so that the first results hold
     every algorithm and setting. With ``final_episodes``, each trial's last checkpoint is
     evaluated over that many episodes once it is trained."""
+    required_env(base.env)
     if not algos:
         raise ConfigError("--algos names no algorithm")
     if len(set(algos)) != len(algos):
@@ -108,7 +109,6 @@ def sweep_trials(
             for algo in algos:
                 try:  # every value as its option is checked, before any trial starts
                     config = with_settings(dataclasses.replace(base, algo=algo, seed=seed), point)
-                    config.validate()
                 except ConfigError as exc:
                     if not point:
                         raise

@@ -11,7 +11,7 @@ from collections.abc import Collection
 from pathlib import Path
 from typing import Any
 
-from dtd.config import Preset, TrainConfig, flat_items, preset_config, with_algorithm_defaults
+from dtd.config import Preset, TrainConfig, flat_items, preset_config, required_env, with_algorithm_defaults
 from dtd.config.settings import DOT_TO_DOT_FIELDS
 from dtd.envs.make import env_kwargs
 from dtd.envs.spec import EnvSpec
@@ -149,9 +149,8 @@ def plan_start(
         run = RunDir(Path(resume))
         # A missing or unreadable run is refused here.
         resumed = _chosen_precision(resumed_config(read_config(run), config, given))
-        resumed.validate()
         return StartPlan(resumed, run, resuming=True)
-    config.validate()
+    required_env(config.env)
     unused = settings_out_of_place(config, given or ())
     if unused:
         raise ConfigError(

@@ -213,8 +213,6 @@ def read_config(run: RunDir) -> TrainConfig:
         raise RunDirError(f"no run in {run.root} (config.json is missing)")
     try:
         payload = json.loads(run.config.read_text())
-        config = read_settings(payload["config"], payload.get("format", 1))
-        config.validate()
-        return config
+        return read_settings(payload["config"], payload.get("format", 1))
     except (json.JSONDecodeError, KeyError, TypeError, ConfigError) as exc:
         raise RunDirError(f"{run.config} is unreadable ({exc})") from exc

@@ -16,6 +16,7 @@ from dtd.config import (
     flat_items,
     preset_config,
     read_settings,
+    required_env,
     with_algorithm_defaults,
     with_settings,
 )
@@ -42,7 +43,6 @@ def test_defaults_are_the_reference_settings_but_where_tuned():
         ({"epochs": 0}, "--epochs"),
         ({"n_cycles": -1}, "--n-cycles"),
         ({"random_eps": 1.5}, "--random-eps"),
-        ({"env": None}, "--env"),
         ({"learner": LearnerConfig(actor_lr=-1e-3)}, "--actor-lr"),
         ({"learner": LearnerConfig(gamma=1.5)}, "--gamma"),
         ({"learner": LearnerConfig(polyak=float("nan"))}, "--polyak"),
@@ -51,7 +51,15 @@ def test_defaults_are_the_reference_settings_but_where_tuned():
 )
 def test_invalid_settings_name_their_option(change, flag):
     with pytest.raises(ConfigError, match=flag):
-        dataclasses.replace(VALID, **change).validate()
+        dataclasses.replace(VALID, **change)
+
+
+def test_a_run_needs_its_environment_given():
+    assert TrainConfig().env is None  # the settings may leave it unset until a run starts
+    with pytest.raises(ConfigError, match="--env is required"):
+        required_env(None)
+    with pytest.raises(ConfigError, match="--env must be given"):
+        TrainConfig(env=" ")
 
 
 def test_the_low_levels_batch_is_the_algorithms_unless_given():
@@ -72,20 +80,21 @@ def test_n_step_is_the_algorithms_unless_given_and_one_for_runs_written_before_i
     assert written["n_step"] is None and TrainConfig.from_dict(written).n_step is None
     # An earlier dtd wrote 0 for "the algorithm's" (format 1); given now, a 0 is a 0.
     assert read_settings({**written, "n_step": 0}, 1).n_step is None
-    assert TrainConfig.from_dict({**written, "n_step": 0}).n_step == 0
+    with pytest.raises(ConfigError, match="--n-step must be at least 1"):
+        TrainConfig.from_dict({**written, "n_step": 0})
     old_learner = {**written["learner"], "batch_size": 0}
     assert read_settings({**written, "learner": old_learner}, 1).learner.batch_size is None
     del written["n_step"]  # a config.json from before the setting existed
     assert read_settings(written, 1).n_step == 1
     assert read_settings(written, CONFIG_FORMAT).n_step is None  # written now: the default
     with pytest.raises(ConfigError, match=r"--batch-size must be at least 1 \(left out: the algorithm's\)"):
-        dataclasses.replace(VALID, learner=LearnerConfig(batch_size=0)).validate()
+        dataclasses.replace(VALID, learner=LearnerConfig(batch_size=0))
     with pytest.raises(ConfigError, match=r"--n-step must be at least 1 \(left out"):
-        dataclasses.replace(VALID, n_step=0).validate()
+        dataclasses.replace(VALID, n_step=0)
     with pytest.raises(ConfigError, match=r"--high\.batch-size must be at least 1, got None"):
-        dataclasses.replace(VALID, dtd=DotToDotConfig(high=LearnerConfig(batch_size=None))).validate()
+        dataclasses.replace(VALID, dtd=DotToDotConfig(high=LearnerConfig(batch_size=None)))
     with pytest.raises(ConfigError, match=r"--high\.batch-size must be at least 1"):
-        dataclasses.replace(VALID, dtd=DotToDotConfig(high=LearnerConfig(batch_size=0))).validate()
+        dataclasses.replace(VALID, dtd=DotToDotConfig(high=LearnerConfig(batch_size=0)))
 
 
 def test_dict_round_trip():
