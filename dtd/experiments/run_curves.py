@@ -103,8 +103,9 @@ def find_runs(directories: Sequence[Path]) -> list[RunCurve]:
             continue
         run = RunCurve(run_dir, config.env or "?", config.algo.value, curve, config.test_episodes)
         # What the algorithm chose counts as given: runs that recorded it and runs that left it
-        # to the algorithm are the same trial.
-        trial = dataclasses.replace(with_algorithm_defaults(config), epochs=1, collector=Collection.auto)
+        # to the algorithm are the same trial, and are labelled alike.
+        config = with_algorithm_defaults(config)
+        trial = dataclasses.replace(config, epochs=1, collector=Collection.auto)
         if trial in trials:
             kept, dropped = sorted([trials[trial], run], key=lambda r: len(r.curve), reverse=True)
             warnings.warn(
@@ -128,15 +129,12 @@ what a run keeps for later."""
 
 
 def setting_labels(configs: Sequence[TrainConfig]) -> list[str]:
-    """Each configuration's label: its algorithm, `` (preset)`` where not the tuned default, then
-    the settings in which it differs from the others of its task, algorithm and preset, as
-    ``name=value`` in option names (``learner=tqc high.learner=tqc``)."""
+    """Each configuration's label (its algorithm's choices made concrete): its algorithm,
+    `` (preset)`` where not the tuned default, then the settings in which it differs from the
+    others of its task, algorithm and preset, as ``name=value`` in option names (``learner=tqc
+    high.learner=tqc``)."""
     flats = [
-        {
-            name: value
-            for name, value in flat_items(with_algorithm_defaults(config)).items()
-            if name not in LABEL_IGNORES
-        }
+        {name: value for name, value in flat_items(config).items() if name not in LABEL_IGNORES}
         for config in configs
     ]
     kin: dict[tuple[str, str, str], list[int]] = {}
