@@ -157,8 +157,8 @@ def build_acting(
 ) -> Acting:
     """The agent ``config`` describes (fresh networks, empty replay) on its evaluation
     environments, all seeded from ``config.seed`` as :func:`build` seeds them; ``eval_seed``
-    seeds the environments apart from training (``dtd eval``). ``config`` has been checked: a
-    plan's (:func:`dtd.training.lifecycle.plan_start`) or a run's own (:func:`read_config`)."""
+    seeds the environments apart from training (``dtd eval``); the task-dependent bounds
+    (a replay of one episode at least, segments within the horizon) are checked here."""
     torch.set_num_threads(resolved_threads(config.threads))
     torch.manual_seed(config.seed)
     seeds = _run_seeds(config, worker)
