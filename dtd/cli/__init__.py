@@ -47,7 +47,7 @@ def main(argv: list[str] | None = None) -> None:
     preset = preset_config(preset_named(args))
     commands = {
         "train": deferred(train, preset, bound={"place": place, "invocation": tuple(args)}),
-        "sweep": deferred(sweep, preset),
+        "sweep": deferred(sweep, preset, bound={"invocation": tuple(args)}),
         "plot": deferred(plot),
         "eval": deferred(evaluate),
         "render": deferred(render),

@@ -125,6 +125,7 @@ def sweep(
     progress: bool = True,
     final_episodes: int = 0,
     grid: Annotated[tuple[str, ...], tyro.conf.UseAppendAction, optional("NAME=V1,V2", "none")] = (),
+    invocation: tuple[str, ...] = (),
 ) -> None:
     """Train every (algorithm, seed) pair of one configuration, each into OUT/<env>-<algo>-s<seed>;
     with --grid, every combination of the grid's settings too, each into
@@ -161,7 +162,9 @@ def sweep(
             setting, trials cover every combination. NAME as the option without dashes
             (learner, updates_per_cycle, high.learner, hidden_sizes). dtd plot labels the
             trials by the settings in which they differ.
+        invocation: The command's arguments, from which the settings given are read.
     """
+    from dtd.cli.options import settings_given
     from dtd.config import Algo
     from dtd.errors import ConfigError
     from dtd.experiments.run_curves import find_runs
@@ -173,7 +176,7 @@ def sweep(
         chosen = [Algo(name.strip()) for name in algos.split(",") if name.strip()]
     except ValueError as exc:
         raise ConfigError(f"--algos: {exc}; choose from {', '.join(a.value for a in Algo)}") from exc
-    trials = sweep_trials(config, chosen, seeds, out, final_episodes, grid)
+    trials = sweep_trials(config, chosen, seeds, out, final_episodes, grid, settings_given(invocation[1:]))
     trials_at_once(trials, parallel)  # refused before anything is written
     ensure_writable(out, "the sweep's runs")
     outcomes = run_sweep(trials, parallel=parallel, ray_address=ray, show_progress=progress)

@@ -83,11 +83,13 @@ def sweep_trials(
     out: Path,
     final_episodes: int = 0,
     grid: Sequence[str] = (),
+    given: frozenset[str] | None = None,
 ) -> list[Trial]:
     """Trials of ``base`` for each algorithm, each point of the ``grid`` (:func:`grid_points`)
     and ``seeds`` seeds from ``base.seed``; ordered seed by seed, so that the first results hold
     every algorithm and setting. With ``final_episodes``, each trial's last checkpoint is
-    evaluated over that many episodes once it is trained."""
+    evaluated over that many episodes once it is trained. ``given`` names the settings of
+    ``base`` the user gave (:attr:`Trial.given`); the grid's count as given too."""
     required_env(base.env)
     if not algos:
         raise ConfigError("--algos names no algorithm")
@@ -113,7 +115,9 @@ def sweep_trials(
                     if not point:
                         raise
                     raise ConfigError(f"--grid {' '.join(point)}: {exc}") from exc
-                trials.append(Trial(config, root / trial_name(config, point), final_episodes))
+                ungridded = dataclasses.replace(base, algo=algo, seed=seed)
+                trial = Trial(ungridded, root / trial_name(config, point), final_episodes, given)
+                trials.append(trial.with_config(config))  # the grid's settings count as given
     return trials
 
 
@@ -203,16 +207,11 @@ def run_sweep(
     Ray; return the outcomes in the order of ``trials``."""
     if ray_address is None:
         count = trials_at_once(trials, parallel)
-        trials = [
-            dataclasses.replace(t, config=sharing_cores(t.config, count, usable_cores())) for t in trials
-        ]
+        trials = [t.with_config(sharing_cores(t.config, count, usable_cores())) for t in trials]
     else:
         # On a cluster each trial keeps to its torch threads (1 unless --threads says more), and
         # Ray gives it as many CPUs: a node then runs as many trials as it has cores.
-        trials = [
-            dataclasses.replace(t, config=dataclasses.replace(t.config, threads=t.config.threads or 1))
-            for t in trials
-        ]
+        trials = [t.with_config(dataclasses.replace(t.config, threads=t.config.threads or 1)) for t in trials]
     with SweepProgress(trials, show_progress) as progress:
         if ray_address is None:
             return run_local(trials, count, progress.trial_ended, progress.refresh)

@@ -21,7 +21,7 @@ import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from dtd.config import Collection, TrainConfig
+from dtd.config import Collection, TrainConfig, flat_items
 from dtd.errors import DtdError
 from dtd.training.launch import on_parent_gone
 
@@ -42,9 +42,23 @@ class Trial:
     """Evaluate the last checkpoint over this many episodes once trained (0: not), saved as
     RUN/eval-latest.json (:func:`dtd.training.trained_run.final_evaluation`)."""
 
+    given: frozenset[str] | None = None
+    """The settings the sweep was given, by their names in :func:`dtd.config.flat_items`: a
+    trial resumed takes these from ``config`` and keeps its own others. None: those of
+    ``config`` that differ from its preset's defaults (:func:`dtd.training.lifecycle.resumed_config`)."""
+
     @property
     def name(self) -> str:
         return self.run_dir.name
+
+    def with_config(self, config: TrainConfig) -> Trial:
+        """This trial with ``config``, the settings in which it differs from the trial's own
+        counted as given."""
+        if self.given is None:
+            return dataclasses.replace(self, config=config)
+        before, after = flat_items(self.config), flat_items(config)
+        changed = {name for name, value in after.items() if value != before[name]}
+        return dataclasses.replace(self, config=config, given=self.given | changed)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -97,7 +111,7 @@ def run_trial(trial: Trial) -> TrialOutcome:
         trial.run_dir.mkdir(parents=True, exist_ok=True)
         # Each trial's epoch lines and warnings go to its own log, not into the sweep's display.
         with open(trial.run_dir / LOG_NAME, "a") as log, contextlib.redirect_stderr(log):
-            train_to_end(trial.config, trial.run_dir)
+            train_to_end(trial.config, trial.run_dir, trial.given)
             if trial.final_episodes:
                 final_evaluation(trial.run_dir, trial.final_episodes)
     except KeyboardInterrupt:

@@ -62,9 +62,7 @@ def resumed_config(
     """
     given_flat = flat_items(given)
     if named is None:
-        defaults = flat_items(preset_config(given.preset))
-        named = {name for name, value in given_flat.items() if value != defaults[name]}
-        named |= {"preset"} if given.preset is not Preset.tuned else set()
+        named = apart_from_defaults(given)
     stored_flat, chosen = flat_items(stored), flat_items(with_algorithm_defaults(stored))
     changes: dict[str, Any] = {}
     for name in sorted(named):
@@ -79,6 +77,15 @@ def resumed_config(
         changes[name] = value
     # Typed as config.json is read (the flat values are plain: an enum's is its text).
     return TrainConfig.from_dict({**stored.to_dict(), **changes})
+
+
+def apart_from_defaults(config: TrainConfig) -> set[str]:
+    """The settings of ``config`` (by their names in :func:`flat_items`) that differ from its
+    preset's defaults, and the preset where it is not the default one: what a configuration
+    built in Python is taken to give."""
+    defaults = flat_items(preset_config(config.preset))
+    named = {name for name, value in flat_items(config).items() if value != defaults[name]}
+    return named | ({"preset"} if config.preset is not Preset.tuned else set())
 
 
 def _same_setting(name: str, given: Any, stored: Any) -> bool:
@@ -185,17 +192,19 @@ def train(
     force: bool = False,
     show_progress: bool = True,
     place: JobPlace = JobPlace(),
+    given: Collection[str] | None = None,
 ) -> TrainState:
     """Start a run in ``run_dir`` (default: runs/<env>-<algo>-s<seed>) or, with ``resume``,
     continue the run in that directory after its last finished epoch; train it to
-    ``config.epochs`` and return its counters and metrics history.
+    ``config.epochs`` and return its counters and metrics history. ``given`` names the
+    settings of ``config`` the caller gives (:func:`plan_start`).
 
     The run directory is held by this process while it trains (a second trainer is refused,
     :mod:`dtd.training.run_lock`); that it can be written is known before anything is built.
     In a job of data-parallel workers (started by torchrun or ``dtd train --workers N``), this
     process is the one at ``place`` (:meth:`JobPlace.from_environment`).
     """
-    return train_planned(plan_start(config, run_dir, resume, force, place), show_progress, place)
+    return train_planned(plan_start(config, run_dir, resume, force, place, given), show_progress, place)
 
 
 def train_planned(plan: StartPlan, show_progress: bool = True, place: JobPlace = JobPlace()) -> TrainState:
@@ -321,15 +330,20 @@ def _collecting(components: Components) -> str:
     return "in a process" if isinstance(components.collector, ProcessCollector) else "inline"
 
 
-def train_to_end(config: TrainConfig, run_dir: Path | str) -> TrainState:
+def train_to_end(
+    config: TrainConfig, run_dir: Path | str, given: Collection[str] | None = None
+) -> TrainState:
     """Bring the run in ``run_dir`` to ``config.epochs``: start it, resume it from its last
-    checkpoint, or leave it as it is when it has already trained that far."""
+    checkpoint, or leave it as it is when it has already trained that far. Resumed, the run
+    takes the settings ``given`` names (None: those of ``config`` apart from its preset's
+    defaults, :func:`resumed_config`) and ``config.epochs`` however it was given."""
     run = RunDir(Path(run_dir))
     if run.config.exists():
         recorded = epochs_recorded(run.root)
         if recorded >= config.epochs:
             return TrainState(epoch=recorded)  # nothing left to train
-        return train(config, resume=run.root, show_progress=False)
+        named = {*(apart_from_defaults(config) if given is None else given), "epochs"}
+        return train(config, resume=run.root, show_progress=False, given=named)
     return train(config, run_dir=run.root, show_progress=False)
 
 

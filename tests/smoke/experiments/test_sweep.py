@@ -171,6 +171,20 @@ def test_sigterm_to_the_sweep_alone_stops_its_trials_too(tmp_path, runner):
     assert epochs_recorded(out / "FetchReach-v4-her-s2") == 0
 
 
+def test_a_sweep_run_again_refuses_a_setting_typed_at_its_default_that_its_trial_began_without(tmp_path):
+    out = tmp_path / "sweep"
+    sweep = ["sweep", "--env", "FetchReach-v4", "--algos", "her", "--seeds", "1", "--parallel", "1"]
+    assert dtd(*sweep, "--epochs", "1", *TINY, "--out", out).returncode == 0
+    assert TINY[:2] == ["--n-cycles", "2"]
+    changed = dtd(*sweep, "--epochs", "2", "--n-cycles", "50", *TINY[2:], "--out", out)  # 50: the default
+    assert changed.returncode == 1, changed.stderr
+    assert "--n-cycles cannot change when resuming (the run has 2)" in changed.stderr
+    assert epochs_recorded(out / "FetchReach-v4-her-s0") == 1
+    # The same command as the trial began with trains it on.
+    assert dtd(*sweep, "--epochs", "2", *TINY, "--out", out).returncode == 0
+    assert epochs_recorded(out / "FetchReach-v4-her-s0") == 2
+
+
 def test_a_failing_trial_is_reported_and_the_others_finish(tmp_path):
     good = Trial(tiny_config(algo=Algo.her), tmp_path / "good")
     bad = Trial(tiny_config(algo=Algo.her, env="NoSuchTask-v0"), tmp_path / "bad")

@@ -71,6 +71,18 @@ def test_trials_running_together_share_the_cores():
     assert sharing_cores(given, workers=2, cores=8) == given  # what the user set is kept
 
 
+def test_a_trial_resumed_takes_the_settings_typed_those_of_its_grid_point_and_its_share_of_cores(tmp_path):
+    base = TrainConfig(env="FetchPush-v4", n_cycles=50)
+    typed = frozenset({"env", "n_cycles"})  # --n-cycles 50 typed at its default
+    trials = sweep_trials(base, [Algo.her, Algo.dtd], 1, tmp_path, grid=["learner=ddpg,tqc"], given=typed)
+    assert trials[0].given == typed  # ddpg: the grid's value is the default, nothing changes
+    assert trials[2].given == typed | {"learner"}
+    shared = trials[2].with_config(sharing_cores(trials[2].config, workers=2, cores=8))
+    assert shared.given == typed | {"learner", "threads", "collector"}
+    # Built in Python, a trial's settings given are guessed when it resumes (resumed_config).
+    assert all(t.given is None for t in sweep_trials(base, [Algo.her], 1, tmp_path))
+
+
 def test_workers_default_to_one_per_core_but_no_more_than_trials(tmp_path, monkeypatch):
     monkeypatch.setattr("dtd.experiments.sweep.usable_cores", lambda: 4)
     trials = [Trial(TrainConfig(env="FetchReach-v4"), tmp_path / str(n)) for n in range(3)]
