@@ -1,5 +1,5 @@
 """Presets and settings by name: the reference (paper) settings, ``NAME=VALUE`` overrides, the
-flat view of a configuration by option names, and the algorithm's batch made concrete."""
+flat view of a configuration by option names, and the algorithm's choices written in."""
 
 from __future__ import annotations
 
@@ -10,8 +10,6 @@ from typing import Any
 
 from dtd.config.settings import (
     DOT_TO_DOT_FIELDS,
-    LOW_LEVEL_BATCH,
-    LOW_LEVEL_N_STEP,
     HighTarget,
     LearnerConfig,
     Precision,
@@ -23,15 +21,10 @@ from dtd.errors import ConfigError
 
 
 def with_algorithm_defaults(config: TrainConfig) -> TrainConfig:
-    """The settings training uses: ``config`` with an unset low-level batch and n-step made its
-    algorithm's (``LOW_LEVEL_BATCH``, ``LOW_LEVEL_N_STEP``). A run records its settings as
-    given, and these among the facts derived from them."""
-    if config.learner.batch_size is None:
-        learner = dataclasses.replace(config.learner, batch_size=LOW_LEVEL_BATCH[config.algo])
-        config = dataclasses.replace(config, learner=learner)
-    if config.n_step is None:
-        config = dataclasses.replace(config, n_step=LOW_LEVEL_N_STEP[config.algo])
-    return config
+    """``config`` with what its algorithm chooses where it is unset written in
+    (:attr:`TrainConfig.low_learner`, :attr:`TrainConfig.low_n_step`): the settings by which two
+    runs are compared, one that left a choice to the algorithm and one that gave it alike."""
+    return dataclasses.replace(config, learner=config.low_learner, n_step=config.low_n_step)
 
 
 def flat_items(config: TrainConfig) -> dict[str, Any]:

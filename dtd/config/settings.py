@@ -265,6 +265,21 @@ class TrainConfig:
         from a run, replaced): a :class:`ConfigError` naming the first that is not."""
         validate(self)
 
+    @property
+    def low_learner(self) -> LearnerConfig:
+        """The learner of ``her``, ``ddpg`` and dtd's low level as training uses it: an unset
+        batch is the algorithm's (``LOW_LEVEL_BATCH``). A run records ``learner`` as given, and
+        this batch among the facts derived from it."""
+        if self.learner.batch_size is not None:
+            return self.learner
+        return dataclasses.replace(self.learner, batch_size=LOW_LEVEL_BATCH[self.algo])
+
+    @property
+    def low_n_step(self) -> int:
+        """The rewards summed per sampled transition of the low level as training uses them: an
+        unset ``n_step`` is the algorithm's (``LOW_LEVEL_N_STEP``)."""
+        return self.n_step if self.n_step is not None else LOW_LEVEL_N_STEP[self.algo]
+
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-ready data (enums as their values)."""
         return plain_data(dataclasses.asdict(self))

@@ -29,7 +29,6 @@ from dtd.config import (
     LearnerKind,
     Precision,
     TrainConfig,
-    with_algorithm_defaults,
 )
 from dtd.envs.make import env_kwargs, make_envs
 from dtd.envs.spec import EnvSpec, goal_functions
@@ -40,8 +39,8 @@ from dtd.training.collector import Collector, InlineCollector, ProcessCollector
 def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Collective = ALONE) -> Agent:
     """The agent ``config.algo`` names, with fresh networks and an empty replay; its learners
     combine their updates with fellow workers through ``collective``."""
-    config = with_algorithm_defaults(config)
-    gamma = config.learner.gamma if config.learner.gamma is not None else spec.default_gamma()
+    learner = config.low_learner
+    gamma = learner.gamma if learner.gamma is not None else spec.default_gamma()
     device = resolved_device(config.device)
     # A run records the precision it chose; ``auto`` here is a configuration never planned as a run.
     precision = UPDATE_DTYPES[resolved_precision(config, device)]
@@ -50,7 +49,7 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
         spec.goal_dim,
         spec.action_dim,
         BoxActionHead(spec.action_max),
-        config.learner,
+        learner,
         gamma,
         spec.sparse_rewards,
         collective,
@@ -71,7 +70,7 @@ def build_agent(config: TrainConfig, spec: EnvSpec, env: gym.Env, collective: Co
         goals.reward,
         low.gamma,
         goals.terminal,
-        config.n_step,
+        config.low_n_step,
         config.past_goal_share,
     )
     if config.algo is not Algo.dtd:

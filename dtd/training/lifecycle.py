@@ -110,30 +110,25 @@ class StartPlan:
     """What :func:`train` starts or resumes, resolved once before anything is built."""
 
     config: TrainConfig
-    """The settings as the run records them: as given for a new run (its thread count and
-    workers made concrete), a resumed run's own with the changes it allows."""
+    """The settings, as the run records them and training uses them: as given for a new run
+    (its thread count, precision and workers made concrete), a resumed run's own with the
+    changes it allows."""
     run: RunDir
     resuming: bool
     force: bool = False
     """Replace a run already in ``run``."""
 
     @property
-    def settings(self) -> TrainConfig:
-        """The settings training uses: ``config`` with what its algorithm chooses where it is
-        unset (the low level's batch, the n-step); derived, never recorded as settings."""
-        return with_algorithm_defaults(self.config)
-
-    @property
     def workers(self) -> int:
         return self.config.workers or 1
 
     def derived(self, spec: EnvSpec) -> dict[str, Any]:
-        """What follows from the settings and the task, as config.json records it beside them."""
-        settings = self.settings
+        """What follows from the settings and the task, as config.json records it beside them:
+        among them what the algorithm chose where a setting was left to it."""
         return {
             "spec": dataclasses.asdict(spec),
-            "batch_size": settings.learner.batch_size,
-            "n_step": settings.n_step,
+            "batch_size": self.config.low_learner.batch_size,
+            "n_step": self.config.low_n_step,
         }
 
 
@@ -215,7 +210,7 @@ def train_planned(plan: StartPlan, show_progress: bool = True, place: JobPlace =
             f"a run of {plan.workers} workers is started by dtd train --workers {plan.workers} or by torchrun"
         )
     group = join_group(plan.workers, place) if place.in_job else WorkerGroup()
-    run, settings = plan.run, plan.settings
+    run, config = plan.run, plan.config
     try:
         # Every worker has looked at the run directory before any of them writes to it.
         group.barrier()
@@ -230,9 +225,9 @@ def train_planned(plan: StartPlan, show_progress: bool = True, place: JobPlace =
                 with restoring(run.latest):
                     state = latest.train_state()
             # A run trained to its end already is left as it is: nothing is built or written.
-            if state.epoch < settings.epochs:
+            if state.epoch < config.epochs:
                 components = build(
-                    settings,
+                    config,
                     worker=group.rank,
                     collective=group.collective,
                     local_workers=place.local_workers,
@@ -271,7 +266,7 @@ def _restored(
     path = run.latest if group.writes else run.worker_shard(group.rank, trained.epoch)
     try:
         checkpoint = latest if group.writes else Checkpoint.read(path)
-        checkpoint.check_fits(plan.settings, components.spec, path)
+        checkpoint.check_fits(plan.config, components.spec, path)
         parts = (components.agent, components.rng, components.collector, components.envs)
         return restore(checkpoint, *parts, path)
     except CheckpointError:
@@ -288,7 +283,7 @@ def _train_built(
 ) -> TrainState:
     """Record the configuration, then train from ``state`` to ``config.epochs`` (worker 0 of
     data-parallel workers records and shows progress; the others only train)."""
-    run, config = plan.run, plan.settings
+    run, config = plan.run, plan.config
     recorder = None
     if group.writes:
         write_config(run, plan.config, plan.derived(components.spec))

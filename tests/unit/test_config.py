@@ -63,19 +63,25 @@ def test_a_run_needs_its_environment_given():
 
 
 def test_the_low_levels_batch_is_the_algorithms_unless_given():
-    batch = {algo: with_algorithm_defaults(TrainConfig(algo=algo)).learner.batch_size for algo in Algo}
+    batch = {algo: TrainConfig(algo=algo).low_learner.batch_size for algo in Algo}
     assert batch == {Algo.her: 1024, Algo.ddpg: 1024, Algo.dtd: 256}
     given = TrainConfig(algo=Algo.dtd, learner=LearnerConfig(batch_size=512))
-    assert with_algorithm_defaults(given).learner == given.learner
-    assert with_algorithm_defaults(preset_config(Preset.paper, algo=Algo.her)).learner.batch_size == 256
-    assert with_algorithm_defaults(TrainConfig(algo=Algo.dtd)).dtd.high.batch_size == 256
+    assert given.low_learner == given.learner
+    assert preset_config(Preset.paper, algo=Algo.her).low_learner.batch_size == 256
+    assert TrainConfig(algo=Algo.dtd).dtd.high.batch_size == 256
+    # Written in, the choices make a run that left them open equal to one that gave them.
+    her = TrainConfig(algo=Algo.her)
+    assert with_algorithm_defaults(her) == with_algorithm_defaults(
+        TrainConfig(algo=Algo.her, n_step=1, learner=LearnerConfig(batch_size=1024))
+    )
+    assert with_algorithm_defaults(her) != her
 
 
 def test_n_step_is_the_algorithms_unless_given_and_one_for_runs_written_before_it():
-    n_step = {algo: with_algorithm_defaults(TrainConfig(algo=algo)).n_step for algo in Algo}
+    n_step = {algo: TrainConfig(algo=algo).low_n_step for algo in Algo}
     assert n_step == {Algo.her: 1, Algo.ddpg: 1, Algo.dtd: 3}
-    assert with_algorithm_defaults(TrainConfig(algo=Algo.dtd, n_step=5)).n_step == 5
-    assert with_algorithm_defaults(preset_config(Preset.paper, algo=Algo.dtd)).n_step == 1
+    assert TrainConfig(algo=Algo.dtd, n_step=5).low_n_step == 5
+    assert preset_config(Preset.paper, algo=Algo.dtd).low_n_step == 1
     written = TrainConfig(algo=Algo.dtd).to_dict()
     assert written["n_step"] is None and TrainConfig.from_dict(written).n_step is None
     # An earlier dtd wrote 0 for "the algorithm's" (format 1); given now, a 0 is a 0.
