@@ -23,6 +23,7 @@ from dtd.config.presets import (
     TUNED,
     flat_items,
     preset_config,
+    settings_apart,
     with_algorithm_defaults,
     with_settings,
 )
@@ -65,6 +66,7 @@ __all__ = [
     "preset_config",
     "read_settings",
     "required_env",
+    "settings_apart",
     "with_algorithm_defaults",
     "with_settings",
 ]

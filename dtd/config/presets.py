@@ -37,6 +37,13 @@ def flat_items(config: TrainConfig) -> dict[str, Any]:
     return flat
 
 
+def settings_apart(config: TrainConfig, other: TrainConfig) -> set[str]:
+    """The settings (by their names in :func:`flat_items`) whose values differ between ``config``
+    and ``other``."""
+    theirs = flat_items(other)
+    return {name for name, value in flat_items(config).items() if value != theirs[name]}
+
+
 TUNED = TrainConfig()
 """The defaults: the reference settings except where docs/tuning.md measured better."""
 

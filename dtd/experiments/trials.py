@@ -21,7 +21,7 @@ import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from dtd.config import Collection, TrainConfig, flat_items
+from dtd.config import Collection, TrainConfig, settings_apart
 from dtd.errors import DtdError
 from dtd.training.launch import on_parent_gone
 
@@ -56,8 +56,7 @@ class Trial:
         counted as given."""
         if self.given is None:
             return dataclasses.replace(self, config=config)
-        before, after = flat_items(self.config), flat_items(config)
-        changed = {name for name, value in after.items() if value != before[name]}
+        changed = settings_apart(config, self.config)
         return dataclasses.replace(self, config=config, given=self.given | changed)
 
 

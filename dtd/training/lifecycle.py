@@ -11,7 +11,15 @@ from collections.abc import Collection
 from pathlib import Path
 from typing import Any
 
-from dtd.config import Preset, TrainConfig, flat_items, preset_config, required_env, with_algorithm_defaults
+from dtd.config import (
+    Preset,
+    TrainConfig,
+    flat_items,
+    preset_config,
+    required_env,
+    settings_apart,
+    with_algorithm_defaults,
+)
 from dtd.config.settings import DOT_TO_DOT_FIELDS
 from dtd.envs.make import env_kwargs
 from dtd.envs.spec import EnvSpec
@@ -83,8 +91,7 @@ def apart_from_defaults(config: TrainConfig) -> set[str]:
     """The settings of ``config`` (by their names in :func:`flat_items`) that differ from its
     preset's defaults, and the preset where it is not the default one: what a configuration
     built in Python is taken to give."""
-    defaults = flat_items(preset_config(config.preset))
-    named = {name for name, value in flat_items(config).items() if value != defaults[name]}
+    named = settings_apart(config, preset_config(config.preset))
     return named | ({"preset"} if config.preset is not Preset.tuned else set())
 
 
