@@ -44,36 +44,26 @@ def main() -> None:
         order = np.argsort(turn, kind="stable")
         members = np.array_split(away[order], GROUPS)
         angles = np.array_split(turn[order], GROUPS)
-        if planner is None:
-            print(f"{args.run_dir}: {args.episodes} episodes, success {episodes.success.mean():.2f}")
-            print("| goal's turn (degrees) | episodes | success |")
-            print("|---|---|---|")
-            for rows, turned in zip(members, angles, strict=True):
-                print(
-                    f"| {turned.min():.0f} - {turned.max():.0f} | {len(rows)} "
-                    f"| {episodes.success[rows].mean():.2f} |"
-                )
-            return
-        plans = planner.plan(episodes)
-        groups = planner.placement_by_distance(episodes, GROUPS)
-    # The intermediate sub-goals' verdicts (the last segment's sub-goal is the task's goal).
-    reached = np.array([np.mean(plan["reached"][:-1]) if plan["reached"][:-1] else np.nan for plan in plans])
-    print(
-        f"{args.run_dir}: {args.episodes} episodes, success {episodes.success.mean():.2f}, "
-        f"sub-goals reached {np.nanmean(reached):.2f}"
-    )
-    print(
-        "| goal's turn (degrees) | episodes | success | first sub-goal: progress along the turn "
-        "| off the turn (degrees) | sub-goals reached |"
-    )
-    print("|---|---|---|---|---|---|")
-    for group, rows in zip(groups, members, strict=True):
-        low, high = group["goal_angle"]
-        print(
-            f"| {low:.0f} - {high:.0f} | {group['episodes']} | {group['success']:.2f} "
-            f"| {group['progress'][0]:.2f} | {group['off_line'][0]:.1f} "
-            f"| {np.nanmean(reached[rows]):.2f} |"
-        )
+        plans = planner.plan(episodes) if planner is not None else None
+        groups = planner.placement_by_distance(episodes, GROUPS) if planner is not None else None
+    summary = f"{args.run_dir}: {args.episodes} episodes, success {episodes.success.mean():.2f}"
+    header = "| goal's turn (degrees) | episodes | success |"
+    if plans is not None:
+        # The intermediate sub-goals' verdicts (the last segment's sub-goal is the task's goal).
+        verdicts = [plan["reached"][:-1] for plan in plans]
+        reached = np.array([np.mean(shown) if shown else np.nan for shown in verdicts])
+        summary += f", sub-goals reached {np.nanmean(reached):.2f}"
+        header += " first sub-goal: progress along the turn | off the turn (degrees) | sub-goals reached |"
+    print(summary)
+    print(header)
+    print("|---" * header.count(" |") + "|")
+    for number, (rows, turned) in enumerate(zip(members, angles, strict=True)):
+        success = episodes.success[rows].mean()
+        line = f"| {turned.min():.0f} - {turned.max():.0f} | {len(rows)} | {success:.2f} |"
+        if groups is not None:
+            first = f"{groups[number]['progress'][0]:.2f} | {groups[number]['off_line'][0]:.1f}"
+            line += f" {first} | {np.nanmean(reached[rows]):.2f} |"
+        print(line)
 
 
 if __name__ == "__main__":
